@@ -1,0 +1,32 @@
+#!/usr/bin/env bash
+# Brings a fresh Debian 12 machine with only Rust to a state where dualgeo builds.
+# Idempotent: when every package is already installed it changes nothing and runs no apt.
+set -euo pipefail
+
+packages=(
+  libopencv-dev   # OpenCV 4.6 headers and libraries for the opencv crate
+  clang           # the opencv crate's binding generator uses libclang
+  libclang-dev
+  pkg-config      # the opencv crate finds OpenCV through pkg-config
+)
+
+missing=()
+for p in "${packages[@]}"; do
+  if ! dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed"; then
+    missing+=("$p")
+  fi
+done
+
+if ((${#missing[@]})); then
+  echo "setup: installing ${missing[*]}" >&2
+  sudo=""
+  if [ "$(id -u)" -ne 0 ]; then sudo="sudo"; fi
+  $sudo apt-get update -qq
+  DEBIAN_FRONTEND=noninteractive $sudo apt-get install -y -qq --no-install-recommends "${missing[@]}" >/dev/null
+fi
+
+if ! command -v cargo >/dev/null 2>&1; then
+  echo "setup: cargo not found; install Rust (rustup) first" >&2
+  exit 1
+fi
+echo "setup: ok (opencv $(pkg-config --modversion opencv4))" >&2

@@ -1,0 +1,147 @@
+//! Estimator configuration: the σ's of Q1, Q2, Q3 (eq. 8–10), the iteration's stopping
+//! rule and the consistency threshold TH (eq. 30). User-facing units are metres,
+//! pixels and degrees; the estimator converts to radians once.
+
+use crate::EstimatorError;
+use serde::{Deserialize, Serialize};
+
+/// Standard deviations of one UAV's measured navigation state.
+///
+/// τ1 (eq. 5) = (x_v, y_v, z_v, x_p, y_p, θ, φ) gets the diagonal covariance
+/// `Q1 = diag(σx², σy², σz², σpx², σpx², σθ², σφ²)`; the yaw ψ gets `σψ²` (Q3's entry
+/// for this UAV).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct NoiseModel {
+    pub sigma_position_m: [f64; 3],
+    pub sigma_pixel_px: f64,
+    pub sigma_pitch_deg: f64,
+    pub sigma_roll_deg: f64,
+    pub sigma_yaw_deg: f64,
+}
+
+impl NoiseModel {
+    /// The same σ on every position axis and on every attitude angle.
+    pub fn isotropic(sigma_pos_m: f64, sigma_att_deg: f64, sigma_pixel_px: f64) -> Self {
+        Self {
+            sigma_position_m: [sigma_pos_m; 3],
+            sigma_pixel_px,
+            sigma_pitch_deg: sigma_att_deg,
+            sigma_roll_deg: sigma_att_deg,
+            sigma_yaw_deg: sigma_att_deg,
+        }
+    }
+
+    /// Variances of τ1 in the order of eq. (5), in m², px² and rad².
+    pub fn tau1_variances(&self) -> [f64; 7] {
+        let [sx, sy, sz] = self.sigma_position_m;
+        let px = self.sigma_pixel_px;
+        let th = self.sigma_pitch_deg.to_radians();
+        let ph = self.sigma_roll_deg.to_radians();
+        [
+            sx * sx,
+            sy * sy,
+            sz * sz,
+            px * px,
+            px * px,
+            th * th,
+            ph * ph,
+        ]
+    }
+
+    /// σψ² in rad² (this UAV's diagonal entry of Q3).
+    pub fn yaw_variance(&self) -> f64 {
+        self.sigma_yaw_deg.to_radians().powi(2)
+    }
+
+    fn validate(&self) -> Result<(), EstimatorError> {
+        let all = [
+            self.sigma_position_m[0],
+            self.sigma_position_m[1],
+            self.sigma_position_m[2],
+            self.sigma_pixel_px,
+            self.sigma_pitch_deg,
+            self.sigma_roll_deg,
+            self.sigma_yaw_deg,
+        ];
+        if all.iter().all(|s| s.is_finite() && *s >= 0.0) {
+            Ok(())
+        } else {
+            Err(EstimatorError::Config(format!(
+                "noise σ's must be finite and >= 0, got {self:?}"
+            )))
+        }
+    }
+}
+
+impl Default for NoiseModel {
+    /// The paper's Table 2 protocol (σ_att 2°, σ_pos 3 m) with a 1 px matching σ.
+    fn default() -> Self {
+        Self::isotropic(3.0, 2.0, 1.0)
+    }
+}
+
+/// Everything the paper's per-window estimator can be tuned with.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct EstimatorConfig {
+    /// Q1 (left UAV) and Q2 (right UAV) with each UAV's yaw σ for Q3.
+    pub noise_left: NoiseModel,
+    pub noise_right: NoiseModel,
+    /// Stop when the largest bias update of an iteration is below this (paper: 0.1°).
+    pub bias_tolerance_deg: f64,
+    /// Stop after this many altitude/regression rounds (paper: 20).
+    pub max_iterations: usize,
+    /// Left/right ray pairs closer to parallel than this are skipped in eq. (16).
+    pub min_ray_angle_deg: f64,
+    /// TH of eq. (30), on e_nm of eq. (31) (sum of both UAVs' bias differences).
+    /// The paper gives no value; 3° separates a wrong correspondence from right ones
+    /// on noise-free data (see the consistency tests) while tolerating matching noise.
+    pub consistency_threshold_deg: f64,
+}
+
+impl Default for EstimatorConfig {
+    fn default() -> Self {
+        Self {
+            noise_left: NoiseModel::default(),
+            noise_right: NoiseModel::default(),
+            bias_tolerance_deg: 0.1,
+            max_iterations: 20,
+            min_ray_angle_deg: 1.0,
+            consistency_threshold_deg: 3.0,
+        }
+    }
+}
+
+impl EstimatorConfig {
+    /// The noise model of a UAV (left = Q1, right = Q2).
+    pub fn noise(&self, uav: shared_types::conventions::Uav) -> &NoiseModel {
+        match uav {
+            shared_types::conventions::Uav::Left => &self.noise_left,
+            shared_types::conventions::Uav::Right => &self.noise_right,
+        }
+    }
+
+    pub fn validate(&self) -> Result<(), EstimatorError> {
+        self.noise_left.validate()?;
+        self.noise_right.validate()?;
+        let positive = |v: f64, name: &str| {
+            if v.is_finite() && v >= 0.0 {
+                Ok(())
+            } else {
+                Err(EstimatorError::Config(format!(
+                    "{name} must be finite and >= 0, got {v}"
+                )))
+            }
+        };
+        positive(self.bias_tolerance_deg, "bias_tolerance_deg")?;
+        positive(self.min_ray_angle_deg, "min_ray_angle_deg")?;
+        positive(self.consistency_threshold_deg, "consistency_threshold_deg")?;
+        if self.max_iterations == 0 {
+            return Err(EstimatorError::Config(
+                "max_iterations must be at least 1".into(),
+            ));
+        }
+        Ok(())
+    }
+}

@@ -1,0 +1,38 @@
+//! # geolocation — the paper's estimator
+//!
+//! Pure functions over plain data (no IPC, no OpenCV) implementing Pan et al. 2023,
+//! "Vision-Based Moving-Target Geolocation Using Dual UAVs":
+//!
+//! | paper | here |
+//! | --- | --- |
+//! | eq. (1), F of eq. (7) and ∂F/∂τ of eq. (12) | [`ground_model`] |
+//! | Section 2.1, eq. (12)–(15): weighted least squares for ξ | [`regression`] |
+//! | Section 2.2, eq. (16)–(23): target altitude | [`altitude`] |
+//! | the altitude/regression iteration | [`iteration`] ([`geolocate`]) |
+//! | Section 2.3, eq. (29)–(32): consistency filter | [`consistency`] |
+//! | Section 3.1: the one-shot baseline | [`one_shot`] |
+//! | Section 3.1's scenario and eq. (33)–(34) | [`synthetic`], [`evaluation`] |
+//!
+//! Units: metres, pixels, radians inside; degrees only in [`EstimatorConfig`] and in
+//! reports. Frames: see `shared_types::conventions`.
+
+pub mod altitude;
+pub mod config;
+pub mod consistency;
+pub mod error;
+pub mod evaluation;
+pub mod ground_model;
+pub mod iteration;
+pub mod observation;
+pub mod one_shot;
+pub mod regression;
+pub mod synthetic;
+
+pub use config::{EstimatorConfig, NoiseModel};
+pub use consistency::{
+    consistency_filter, geolocate_filtered, ConsistencyOutcome, FilteredEstimate,
+};
+pub use error::EstimatorError;
+pub use iteration::{geolocate, Estimate};
+pub use observation::Observation;
+pub use one_shot::one_shot;

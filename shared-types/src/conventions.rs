@@ -1,0 +1,313 @@
+//! Frame conventions, defined once for every dualgeo crate.
+//!
+//! These follow `docs/recording-format.md` (the recording format, version 1) exactly;
+//! `docs/conventions.md` has the sketch. In short:
+//!
+//! * **World `w`**: local ENU, metres. x east, y north, z up.
+//! * **Navigation `n`**: local NED (x north, y east, z down), only as the reference of
+//!   the attitude angles.
+//! * **Body `b`**: FRD (x forward, y right, z down).
+//! * **Attitude**: aerospace Z-Y-X Euler angles (yaw ψ, pitch θ, roll φ) of the body
+//!   relative to NED: `C_n^b = Rz(ψ) · Ry(θ) · Rx(φ)` maps body vectors to NED.
+//!   yaw 0 = nose north, +90° = nose east; pitch positive nose up; roll positive right
+//!   wing down.
+//! * **Camera `c`** (OpenCV): x right in the image, y down in the image, z along the
+//!   optical axis. Pixels: (0, 0) is the centre of the top-left pixel.
+//! * **Nadir mount**: optical axis = body down, image x = body right, image y = body
+//!   backward, so the top of the image points to the nose.
+//!
+//! The paper writes `C_w^c` for the rotation "from the camera coordinate system c to the
+//! world coordinate system w" (eq. 1); [`camera_to_world`] builds exactly that, and it is
+//! the only place in dualgeo that does.
+
+use nalgebra::{Matrix3, Rotation3, Vector2, Vector3};
+use serde::{Deserialize, Serialize};
+
+/// Which of the two UAVs an image or a pose belongs to.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Uav {
+    Left,
+    Right,
+}
+
+impl Uav {
+    /// Index used for per-UAV arrays: left = 0, right = 1.
+    pub fn index(self) -> usize {
+        match self {
+            Uav::Left => 0,
+            Uav::Right => 1,
+        }
+    }
+
+    /// The name used in recordings (`left`, `right`).
+    pub fn name(self) -> &'static str {
+        match self {
+            Uav::Left => "left",
+            Uav::Right => "right",
+        }
+    }
+}
+
+/// Aerospace Z-Y-X attitude of the body (FRD) relative to NED, in **radians**.
+///
+/// Recordings and messages carry degrees; convert with [`Attitude::from_degrees`] at the
+/// boundary. Everything inside dualgeo computes in radians.
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+pub struct Attitude {
+    /// ψ, rotation about NED down; 0 = nose north, +π/2 = nose east.
+    pub yaw: f64,
+    /// θ, positive nose up.
+    pub pitch: f64,
+    /// φ, positive right wing down.
+    pub roll: f64,
+}
+
+impl Attitude {
+    pub fn new(yaw: f64, pitch: f64, roll: f64) -> Self {
+        Self { yaw, pitch, roll }
+    }
+
+    pub fn from_degrees(yaw_deg: f64, pitch_deg: f64, roll_deg: f64) -> Self {
+        Self::new(
+            yaw_deg.to_radians(),
+            pitch_deg.to_radians(),
+            roll_deg.to_radians(),
+        )
+    }
+
+    /// The same attitude with a yaw bias (radians) removed: measured = true + bias
+    /// (eq. 10 and the recording format), so the corrected yaw is `yaw − bias`.
+    pub fn corrected_for_yaw_bias(self, bias: f64) -> Self {
+        Self {
+            yaw: self.yaw - bias,
+            ..self
+        }
+    }
+
+    pub fn is_finite(&self) -> bool {
+        self.yaw.is_finite() && self.pitch.is_finite() && self.roll.is_finite()
+    }
+}
+
+/// Rotation from NED to ENU (its own inverse): swaps x and y and flips z.
+pub fn ned_to_enu() -> Matrix3<f64> {
+    Matrix3::new(0.0, 1.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, -1.0)
+}
+
+/// `C_n^b`: body (FRD) vectors to NED, `Rz(ψ) Ry(θ) Rx(φ)`.
+pub fn body_to_ned(att: Attitude) -> Matrix3<f64> {
+    Rotation3::from_euler_angles(att.roll, att.pitch, att.yaw).into_inner()
+}
+
+/// Nadir mount: camera (OpenCV) vectors to body (FRD). Columns are the camera axes in
+/// the body frame: image x = body right, image y = body backward, optical axis = body down.
+pub fn nadir_camera_to_body() -> Matrix3<f64> {
+    Matrix3::new(0.0, -1.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0)
+}
+
+/// `C_w^c` of eq. (1): rotation taking camera-frame vectors to the world (ENU) frame for
+/// a nadir camera on a body with attitude `att`.
+///
+/// `C_w^c = C_enu^ned · C_n^b(ψ, θ, φ) · C_b^c(nadir)`.
+pub fn camera_to_world(att: Attitude) -> Matrix3<f64> {
+    ned_to_enu() * body_to_ned(att) * nadir_camera_to_body()
+}
+
+/// Partial derivatives of [`camera_to_world`] with respect to (yaw, pitch, roll).
+///
+/// Each elementary rotation `R_a(α)` has `dR_a/dα = R_a(α) · [e_a]×`, so e.g.
+/// `∂C/∂ψ = C_enu^ned · Rz(ψ) [e_z]× Ry(θ) Rx(φ) · C_b^c`.
+pub fn camera_to_world_partials(att: Attitude) -> [Matrix3<f64>; 3] {
+    let rz = Rotation3::from_axis_angle(&Vector3::z_axis(), att.yaw).into_inner();
+    let ry = Rotation3::from_axis_angle(&Vector3::y_axis(), att.pitch).into_inner();
+    let rx = Rotation3::from_axis_angle(&Vector3::x_axis(), att.roll).into_inner();
+    let skew = |v: Vector3<f64>| v.cross_matrix();
+    let left = ned_to_enu();
+    let right = nadir_camera_to_body();
+    [
+        left * rz * skew(Vector3::z()) * ry * rx * right,
+        left * rz * ry * skew(Vector3::y()) * rx * right,
+        left * rz * ry * rx * skew(Vector3::x()) * right,
+    ]
+}
+
+/// Pinhole intrinsics of eq. (26), in pixels, OpenCV convention. Images in dualgeo are
+/// undistorted before they reach the estimator (recording-format distortion is applied
+/// to pixels by the vision crates, never here).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Intrinsics {
+    pub fx: f64,
+    pub fy: f64,
+    pub cx: f64,
+    pub cy: f64,
+}
+
+impl Intrinsics {
+    pub fn new(fx: f64, fy: f64, cx: f64, cy: f64) -> Self {
+        Self { fx, fy, cx, cy }
+    }
+
+    /// A camera whose horizontal field of view is `hfov_deg` with square pixels and the
+    /// principal point in the middle of a `width` × `height` image.
+    pub fn from_hfov(width: u32, height: u32, hfov_deg: f64) -> Self {
+        let f = (width as f64 / 2.0) / (hfov_deg.to_radians() / 2.0).tan();
+        Self::new(
+            f,
+            f,
+            (width as f64 - 1.0) / 2.0,
+            (height as f64 - 1.0) / 2.0,
+        )
+    }
+
+    /// `K⁻¹ [u, v, 1]ᵀ`: the camera-frame direction of a pixel (eq. 24's inner term),
+    /// scaled so its z component is 1. The paper's `(x_p, y_p, f)` with `f_x = f_y = f`
+    /// is this vector times `f`; every use in dualgeo is scale-invariant.
+    pub fn pixel_to_ray(&self, pixel: Vector2<f64>) -> Vector3<f64> {
+        Vector3::new(
+            (pixel.x - self.cx) / self.fx,
+            (pixel.y - self.cy) / self.fy,
+            1.0,
+        )
+    }
+
+    /// Projects a camera-frame point to pixels; `None` when it is not in front of the camera.
+    pub fn project(&self, p_cam: Vector3<f64>) -> Option<Vector2<f64>> {
+        if p_cam.z <= 0.0 || !p_cam.iter().all(|v| v.is_finite()) {
+            return None;
+        }
+        Some(Vector2::new(
+            self.fx * p_cam.x / p_cam.z + self.cx,
+            self.fy * p_cam.y / p_cam.z + self.cy,
+        ))
+    }
+
+    /// The 3×3 matrix K of eq. (26).
+    pub fn matrix(&self) -> Matrix3<f64> {
+        Matrix3::new(self.fx, 0.0, self.cx, 0.0, self.fy, self.cy, 0.0, 0.0, 1.0)
+    }
+
+    pub fn is_valid(&self) -> bool {
+        self.fx.is_finite()
+            && self.fy.is_finite()
+            && self.cx.is_finite()
+            && self.cy.is_finite()
+            && self.fx > 0.0
+            && self.fy > 0.0
+    }
+}
+
+/// Wraps an angle in radians to (-π, π].
+pub fn wrap_angle(a: f64) -> f64 {
+    let two_pi = std::f64::consts::TAU;
+    let mut w = a.rem_euclid(two_pi);
+    if w > std::f64::consts::PI {
+        w -= two_pi;
+    }
+    w
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use approx_eq::assert_close;
+    use proptest::prelude::*;
+    use std::f64::consts::FRAC_PI_2;
+
+    mod approx_eq {
+        macro_rules! assert_close {
+            ($a:expr, $b:expr, $tol:expr) => {{
+                let (a, b) = ($a, $b);
+                assert!((a - b).norm() < $tol, "{a} != {b}");
+            }};
+        }
+        pub(crate) use assert_close;
+    }
+
+    #[test]
+    fn level_nose_north_looks_down_with_image_top_north() {
+        let c = camera_to_world(Attitude::default());
+        assert_close!(c * Vector3::z(), -Vector3::z(), 1e-12); // optical axis down
+        assert_close!(c * -Vector3::y(), Vector3::y(), 1e-12); // image top = north
+        assert_close!(c * Vector3::x(), Vector3::x(), 1e-12); // image right = east
+    }
+
+    #[test]
+    fn yaw_east_turns_image_top_east() {
+        let c = camera_to_world(Attitude::new(FRAC_PI_2, 0.0, 0.0));
+        assert_close!(c * -Vector3::y(), Vector3::x(), 1e-12); // image top = nose = east
+        assert_close!(c * Vector3::x(), -Vector3::y(), 1e-12); // image right = south
+    }
+
+    #[test]
+    fn pitch_up_tilts_optical_axis_forward() {
+        // Nose up by 10°: the belly, and the nadir camera, turn towards the nose (north).
+        let c = camera_to_world(Attitude::from_degrees(0.0, 10.0, 0.0));
+        let axis = c * Vector3::z();
+        assert!(axis.y > 0.0 && axis.z < 0.0, "{axis}");
+        assert!((axis.y - 10f64.to_radians().sin()).abs() < 1e-12);
+    }
+
+    #[test]
+    fn roll_right_wing_down_tilts_optical_axis_left() {
+        let c = camera_to_world(Attitude::from_degrees(0.0, 0.0, 10.0));
+        let axis = c * Vector3::z();
+        assert!(axis.x < 0.0 && axis.z < 0.0, "{axis}");
+    }
+
+    #[test]
+    fn pixel_ray_round_trip() {
+        let k = Intrinsics::new(554.26, 560.0, 319.5, 239.5);
+        let px = Vector2::new(100.25, 400.75);
+        let back = k.project(k.pixel_to_ray(px) * 7.0).unwrap();
+        assert_close!(back, px, 1e-9);
+        assert_eq!(k.project(Vector3::new(0.0, 0.0, -1.0)), None);
+    }
+
+    #[test]
+    fn wrap_angle_range() {
+        assert!((wrap_angle(3.0 * std::f64::consts::PI) - std::f64::consts::PI).abs() < 1e-12);
+        assert!((wrap_angle(-std::f64::consts::PI) - std::f64::consts::PI).abs() < 1e-12);
+        assert!((wrap_angle(0.5) - 0.5).abs() < 1e-15);
+    }
+
+    proptest! {
+        #[test]
+        fn camera_to_world_is_a_proper_rotation(
+            yaw in -4.0f64..4.0, pitch in -1.4f64..1.4, roll in -3.0f64..3.0
+        ) {
+            let c = camera_to_world(Attitude::new(yaw, pitch, roll));
+            prop_assert!((c * c.transpose() - Matrix3::identity()).norm() < 1e-12);
+            prop_assert!((c.determinant() - 1.0).abs() < 1e-12);
+        }
+
+        #[test]
+        fn partials_match_central_differences(
+            yaw in -4.0f64..4.0, pitch in -1.4f64..1.4, roll in -3.0f64..3.0
+        ) {
+            let att = Attitude::new(yaw, pitch, roll);
+            let d = camera_to_world_partials(att);
+            let h = 1e-6;
+            let num = |f: &dyn Fn(f64) -> Attitude| {
+                (camera_to_world(f(h)) - camera_to_world(f(-h))) / (2.0 * h)
+            };
+            let fd = [
+                num(&|e| Attitude::new(yaw + e, pitch, roll)),
+                num(&|e| Attitude::new(yaw, pitch + e, roll)),
+                num(&|e| Attitude::new(yaw, pitch, roll + e)),
+            ];
+            for k in 0..3 {
+                prop_assert!((d[k] - fd[k]).norm() < 1e-7, "partial {k}");
+            }
+        }
+
+        #[test]
+        fn yaw_rotates_about_world_up(yaw in -4.0f64..4.0, pitch in -0.5f64..0.5, roll in -0.5f64..0.5) {
+            // Adding yaw in NED (about down) rotates world vectors about ENU up by -yaw.
+            let c0 = camera_to_world(Attitude::new(0.0, pitch, roll));
+            let c1 = camera_to_world(Attitude::new(yaw, pitch, roll));
+            let rz = Rotation3::from_axis_angle(&Vector3::z_axis(), -yaw).into_inner();
+            prop_assert!((c1 - rz * c0).norm() < 1e-12);
+        }
+    }
+}

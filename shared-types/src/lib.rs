@@ -1,0 +1,8 @@
+//! # shared-types
+//!
+//! What every dualgeo process agrees on: the frame conventions (one function builds
+//! C_w^c), the shared-memory message layouts and the service names.
+
+pub mod conventions;
+pub mod messages;
+pub mod service_names;
