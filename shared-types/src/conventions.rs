@@ -109,26 +109,55 @@ pub fn nadir_camera_to_body() -> Matrix3<f64> {
 /// `C_w^c` of eq. (1): rotation taking camera-frame vectors to the world (ENU) frame for
 /// a nadir camera on a body with attitude `att`.
 ///
-/// `C_w^c = C_enu^ned · C_n^b(ψ, θ, φ) · C_b^c(nadir)`.
+/// `C_w^c = C_enu^ned · C_n^b(ψ, θ, φ) · C_b^c(nadir)`, computed as
+/// `yaw_to_world(ψ) · LevelledCamera::new(θ, φ).rotation` (the same product, split so
+/// that estimators can update the yaw without recomputing the rest).
 pub fn camera_to_world(att: Attitude) -> Matrix3<f64> {
-    ned_to_enu() * body_to_ned(att) * nadir_camera_to_body()
+    yaw_to_world(att.yaw) * LevelledCamera::new(att.pitch, att.roll).rotation
+}
+
+/// `C_enu^ned · Rz(ψ)`: the yaw part of [`camera_to_world`].
+pub fn yaw_to_world(yaw: f64) -> Matrix3<f64> {
+    ned_to_enu() * Rotation3::from_axis_angle(&Vector3::z_axis(), yaw).into_inner()
+}
+
+/// `∂/∂ψ [C_enu^ned · Rz(ψ)] = C_enu^ned · Rz(ψ) · [e_z]×`.
+pub fn yaw_to_world_derivative(yaw: f64) -> Matrix3<f64> {
+    yaw_to_world(yaw) * Vector3::z().cross_matrix()
+}
+
+/// The pitch/roll part of [`camera_to_world`], `Ry(θ) Rx(φ) C_b^c(nadir)`, and its
+/// partial derivatives. Each elementary rotation has `dR_a/dα = R_a(α) · [e_a]×`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LevelledCamera {
+    pub rotation: Matrix3<f64>,
+    /// `Ry(θ) [e_y]× Rx(φ) C_b^c`.
+    pub d_pitch: Matrix3<f64>,
+    /// `Ry(θ) Rx(φ) [e_x]× C_b^c`.
+    pub d_roll: Matrix3<f64>,
+}
+
+impl LevelledCamera {
+    pub fn new(pitch: f64, roll: f64) -> Self {
+        let ry = Rotation3::from_axis_angle(&Vector3::y_axis(), pitch).into_inner();
+        let rx = Rotation3::from_axis_angle(&Vector3::x_axis(), roll).into_inner();
+        let mount = nadir_camera_to_body();
+        Self {
+            rotation: ry * rx * mount,
+            d_pitch: ry * Vector3::y().cross_matrix() * rx * mount,
+            d_roll: ry * rx * Vector3::x().cross_matrix() * mount,
+        }
+    }
 }
 
 /// Partial derivatives of [`camera_to_world`] with respect to (yaw, pitch, roll).
-///
-/// Each elementary rotation `R_a(α)` has `dR_a/dα = R_a(α) · [e_a]×`, so e.g.
-/// `∂C/∂ψ = C_enu^ned · Rz(ψ) [e_z]× Ry(θ) Rx(φ) · C_b^c`.
 pub fn camera_to_world_partials(att: Attitude) -> [Matrix3<f64>; 3] {
-    let rz = Rotation3::from_axis_angle(&Vector3::z_axis(), att.yaw).into_inner();
-    let ry = Rotation3::from_axis_angle(&Vector3::y_axis(), att.pitch).into_inner();
-    let rx = Rotation3::from_axis_angle(&Vector3::x_axis(), att.roll).into_inner();
-    let skew = |v: Vector3<f64>| v.cross_matrix();
-    let left = ned_to_enu();
-    let right = nadir_camera_to_body();
+    let level = LevelledCamera::new(att.pitch, att.roll);
+    let yaw = yaw_to_world(att.yaw);
     [
-        left * rz * skew(Vector3::z()) * ry * rx * right,
-        left * rz * ry * skew(Vector3::y()) * rx * right,
-        left * rz * ry * rx * skew(Vector3::x()) * right,
+        yaw_to_world_derivative(att.yaw) * level.rotation,
+        yaw * level.d_pitch,
+        yaw * level.d_roll,
     ]
 }
 
@@ -222,6 +251,13 @@ mod tests {
             }};
         }
         pub(crate) use assert_close;
+    }
+
+    #[test]
+    fn split_product_is_the_textbook_product() {
+        let att = Attitude::from_degrees(-123.0, 7.0, -4.0);
+        let textbook = ned_to_enu() * body_to_ned(att) * nadir_camera_to_body();
+        assert!((camera_to_world(att) - textbook).norm() < 1e-12);
     }
 
     #[test]

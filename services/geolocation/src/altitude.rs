@@ -8,7 +8,7 @@
 //! Eq. (17)/(18) then read `h_ij = z_vL − z_P'` and `h_ji = z_vR − z_P'`, the relative
 //! altitude (eq. 2, positive down) of the midpoint P' below each camera.
 
-use crate::ground_model::world_ray;
+use crate::ground_model::PreparedRay;
 use crate::{EstimatorError, Observation};
 use nalgebra::{Matrix3, Point3, Vector3};
 use shared_types::conventions::Uav;
@@ -89,22 +89,24 @@ pub struct AltitudeEstimate {
 /// N_L = N_R = N.
 pub fn estimate_altitude(
     observations: &[Observation],
+    rays: &[PreparedRay],
     yaw_bias: [f64; 2],
     min_ray_angle_rad: f64,
 ) -> Result<AltitudeEstimate, EstimatorError> {
-    // Per image: (sum of h over its usable pairs, count). Stack storage for N ≤ 16 a side
-    // would do, but observation sets are small and this keeps the code plain.
-    let rays: Vec<Vector3<f64>> = observations
+    struct Image {
+        dir: Vector3<f64>,
+        h_sum: f64,
+        h_count: usize,
+    }
+    let mut images: Vec<Image> = observations
         .iter()
-        .map(|o| {
-            world_ray(
-                o,
-                o.attitude.corrected_for_yaw_bias(yaw_bias[o.uav.index()]),
-            )
+        .zip(rays)
+        .map(|(o, ray)| Image {
+            dir: ray.direction(o.corrected_yaw(yaw_bias)),
+            h_sum: 0.0,
+            h_count: 0,
         })
         .collect();
-    let mut h_sum = vec![0.0; observations.len()];
-    let mut h_count = vec![0usize; observations.len()];
     let (mut pairs_used, mut near_parallel, mut behind) = (0, 0, 0);
 
     for (i, left) in observations.iter().enumerate() {
@@ -117,18 +119,18 @@ pub fn estimate_altitude(
             }
             match ray_pair_midpoint(
                 left.position,
-                rays[i],
+                images[i].dir,
                 right.position,
-                rays[j],
+                images[j].dir,
                 min_ray_angle_rad,
             ) {
                 Ok(pair) => {
                     // Eq. (17): h_ij, relative altitude below the left camera.
-                    h_sum[i] += left.position.z - pair.midpoint.z;
-                    h_count[i] += 1;
+                    images[i].h_sum += left.position.z - pair.midpoint.z;
+                    images[i].h_count += 1;
                     // Eq. (18): h_ji, relative altitude below the right camera.
-                    h_sum[j] += right.position.z - pair.midpoint.z;
-                    h_count[j] += 1;
+                    images[j].h_sum += right.position.z - pair.midpoint.z;
+                    images[j].h_count += 1;
                     pairs_used += 1;
                 }
                 Err(PairRejection::NearParallel) => near_parallel += 1,
@@ -148,11 +150,11 @@ pub fn estimate_altitude(
     let mut rhs_sum = 0.0;
     let mut rhs_sq = 0.0;
     let mut images_used = 0usize;
-    for (k, o) in observations.iter().enumerate() {
-        if h_count[k] == 0 {
+    for (o, image) in observations.iter().zip(&images) {
+        if image.h_count == 0 {
             continue;
         }
-        let h_bar = h_sum[k] / h_count[k] as f64;
+        let h_bar = image.h_sum / image.h_count as f64;
         let row = o.position.z - h_bar;
         rhs_sum += row;
         rhs_sq += row * row;

@@ -12,7 +12,7 @@
 
 use crate::{EstimatorError, Observation};
 use nalgebra::{Matrix2x6, SMatrix, Vector2, Vector3};
-use shared_types::conventions::{camera_to_world, camera_to_world_partials, Attitude};
+use shared_types::conventions::{yaw_to_world, yaw_to_world_derivative, Attitude, LevelledCamera};
 
 /// ∂F/∂τ for one image: τ1 of eq. (5) (own UAV), and τ3's own yaw entry.
 pub type Matrix2x7 = SMatrix<f64, 2, 7>;
@@ -30,9 +30,42 @@ pub struct GroundFix {
     pub d_z_target: Vector2<f64>,
 }
 
+/// One image's target ray with everything that does not depend on the yaw computed once:
+/// `C_w^c K⁻¹(u,v,1)ᵀ = yaw_to_world(ψ) · level`, and likewise for the derivatives with
+/// respect to pitch, roll and the pixel. The iteration only changes the yaw.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PreparedRay {
+    /// `Ry Rx C_b^c K⁻¹(u,v,1)ᵀ`, and its derivatives by θ, φ, u, v.
+    level: Vector3<f64>,
+    level_d_pitch: Vector3<f64>,
+    level_d_roll: Vector3<f64>,
+    level_d_u: Vector3<f64>,
+    level_d_v: Vector3<f64>,
+}
+
+impl PreparedRay {
+    pub fn new(obs: &Observation) -> Self {
+        let cam = LevelledCamera::new(obs.attitude.pitch, obs.attitude.roll);
+        let ray = obs.intrinsics.pixel_to_ray(obs.pixel);
+        Self {
+            level: cam.rotation * ray,
+            level_d_pitch: cam.d_pitch * ray,
+            level_d_roll: cam.d_roll * ray,
+            level_d_u: cam.rotation * Vector3::new(1.0 / obs.intrinsics.fx, 0.0, 0.0),
+            level_d_v: cam.rotation * Vector3::new(0.0, 1.0 / obs.intrinsics.fy, 0.0),
+        }
+    }
+
+    /// World direction of the ray for yaw `yaw` (radians).
+    pub fn direction(&self, yaw: f64) -> Vector3<f64> {
+        yaw_to_world(yaw) * self.level
+    }
+}
+
 /// The world-frame direction of the target ray of `obs` under `attitude`.
 pub fn world_ray(obs: &Observation, attitude: Attitude) -> Vector3<f64> {
-    camera_to_world(attitude) * obs.intrinsics.pixel_to_ray(obs.pixel)
+    let obs = Observation { attitude, ..*obs };
+    PreparedRay::new(&obs).direction(attitude.yaw)
 }
 
 /// Eq. (1) for image `index`: the target's (x_P, y_P) at altitude `z_target`, using
@@ -73,33 +106,27 @@ fn ray_scale(
 }
 
 /// Eq. (1) with its analytic Jacobians with respect to the navigation state τ (eq. 5–6),
-/// the yaw (τ3) and the target altitude.
+/// the yaw (τ3) and the target altitude, for `obs` with its yaw replaced by `yaw`.
 ///
 /// With `d = C_w^c(ψ,θ,φ) K⁻¹(u,v,1)ᵀ`, `h = z_P − z_v` and `F = p_v,xy + h d_xy / d_z`:
 /// `∂F/∂x_v = e_x`, `∂F/∂y_v = e_y`, `∂F/∂z_v = −d_xy/d_z`, `∂F/∂z_P = d_xy/d_z` and, for
 /// any α that moves the ray, `∂F/∂α = h (d'_xy d_z − d_xy d'_z) / d_z²` with `d' = ∂d/∂α`.
-pub fn ground_fix(
+pub fn prepared_ground_fix(
     index: usize,
     obs: &Observation,
-    attitude: Attitude,
+    ray: &PreparedRay,
+    yaw: f64,
     z_target: f64,
 ) -> Result<GroundFix, EstimatorError> {
-    let c = camera_to_world(attitude);
-    let ray_cam = obs.intrinsics.pixel_to_ray(obs.pixel);
-    let d = c * ray_cam;
+    let world = yaw_to_world(yaw);
+    let d = world * ray.level;
     let scale = ray_scale(index, obs, d, z_target)?;
     let h = z_target - obs.position.z;
     let d_xy = d.xy();
     let along = |dd: Vector3<f64>| h * (dd.xy() * d.z - d_xy * dd.z) / (d.z * d.z);
 
-    let [dc_yaw, dc_pitch, dc_roll] = camera_to_world_partials(attitude);
-    let d_u = along(c * Vector3::new(1.0 / obs.intrinsics.fx, 0.0, 0.0));
-    let d_v = along(c * Vector3::new(0.0, 1.0 / obs.intrinsics.fy, 0.0));
-    let d_pitch = along(dc_pitch * ray_cam);
-    let d_roll = along(dc_roll * ray_cam);
-    let d_yaw = along(dc_yaw * ray_cam);
+    let d_yaw = along(yaw_to_world_derivative(yaw) * ray.level);
     let d_z_target = d_xy / d.z;
-
     let mut d_nav = Matrix2x7::zeros();
     d_nav
         .fixed_view_mut::<2, 6>(0, 0)
@@ -107,11 +134,11 @@ pub fn ground_fix(
             Vector2::x(),
             Vector2::y(),
             -d_z_target,
-            d_u,
-            d_v,
-            d_pitch,
+            along(world * ray.level_d_u),
+            along(world * ray.level_d_v),
+            along(world * ray.level_d_pitch),
         ]));
-    d_nav.set_column(6, &d_roll);
+    d_nav.set_column(6, &along(world * ray.level_d_roll));
 
     Ok(GroundFix {
         xy: obs.position.xy().coords + scale * d_xy,
@@ -119,6 +146,17 @@ pub fn ground_fix(
         d_yaw,
         d_z_target,
     })
+}
+
+/// [`prepared_ground_fix`] for a single evaluation at `attitude`.
+pub fn ground_fix(
+    index: usize,
+    obs: &Observation,
+    attitude: Attitude,
+    z_target: f64,
+) -> Result<GroundFix, EstimatorError> {
+    let obs = Observation { attitude, ..*obs };
+    prepared_ground_fix(index, &obs, &PreparedRay::new(&obs), attitude.yaw, z_target)
 }
 
 #[cfg(test)]

@@ -10,6 +10,7 @@
 //! *update*, since the biases themselves are e.g. 20°) or after `max_iterations` rounds.
 
 use crate::altitude::estimate_altitude;
+use crate::ground_model::PreparedRay;
 use crate::observation::validate_set;
 use crate::regression::solve_regression;
 use crate::{EstimatorConfig, EstimatorError, Observation};
@@ -48,12 +49,13 @@ pub fn geolocate(
     let tolerance = config.bias_tolerance_deg.to_radians();
     let min_angle = config.min_ray_angle_deg.to_radians();
     let mut bias = [0.0f64; 2];
+    let rays: Vec<PreparedRay> = observations.iter().map(PreparedRay::new).collect();
 
     let mut iteration = 0;
     loop {
         iteration += 1;
-        let altitude = estimate_altitude(observations, bias, min_angle)?;
-        let solution = solve_regression(observations, altitude.z_target, bias, config)?;
+        let altitude = estimate_altitude(observations, &rays, bias, min_angle)?;
+        let solution = solve_regression(observations, &rays, altitude.z_target, bias, config)?;
         bias[0] += solution.bias_update[0];
         bias[1] += solution.bias_update[1];
         let step = solution.bias_update[0]

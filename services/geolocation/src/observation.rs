@@ -22,6 +22,14 @@ pub struct Observation {
 }
 
 impl Observation {
+    /// Eq. (19)'s yaw: the measured yaw with this image's UAV's bias estimate removed
+    /// (`yaw_bias` indexed by `Uav::index`, radians; measured = true + bias, eq. 10).
+    pub fn corrected_yaw(&self, yaw_bias: [f64; 2]) -> f64 {
+        self.attitude
+            .corrected_for_yaw_bias(yaw_bias[self.uav.index()])
+            .yaw
+    }
+
     /// Checks that every number is finite and the intrinsics are usable.
     pub fn validate(&self, index: usize) -> Result<(), EstimatorError> {
         let finite = |ok: bool, what| {

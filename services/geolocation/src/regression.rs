@@ -18,9 +18,9 @@
 //! 4×4 normal equations by Cholesky: no explicit inverse is formed to solve. The
 //! covariance (AᵀQ⁻¹A)⁻¹ is computed from the same factor for reporting.
 
-use crate::ground_model::ground_fix;
+use crate::ground_model::{prepared_ground_fix, PreparedRay};
 use crate::{EstimatorConfig, EstimatorError, Observation};
-use nalgebra::{Matrix2, Matrix2x4, Matrix4, SMatrix, Vector2, Vector4};
+use nalgebra::{Matrix2, Matrix2x4, Matrix4, Vector2, Vector4};
 
 /// Variance floor added to Q_k's diagonal, m². Keeps the weights finite when a user sets
 /// every σ to zero (noise-free replay); 1 mm is far below any real geolocation error.
@@ -47,6 +47,7 @@ pub struct RegressionSolution {
 /// yaws corrected by `yaw_bias` (radians, index by `Uav::index`).
 pub fn solve_regression(
     observations: &[Observation],
+    rays: &[PreparedRay],
     z_target: f64,
     yaw_bias: [f64; 2],
     config: &EstimatorConfig,
@@ -55,17 +56,20 @@ pub fn solve_regression(
     let mut rhs = Vector4::<f64>::zeros();
     let mut bb = 0.0;
 
-    for (k, obs) in observations.iter().enumerate() {
+    for (k, (obs, ray)) in observations.iter().zip(rays).enumerate() {
         let uav = obs.uav.index();
-        let attitude = obs.attitude.corrected_for_yaw_bias(yaw_bias[uav]);
-        let fix = ground_fix(k, obs, attitude, z_target)?;
+        let yaw = obs.corrected_yaw(yaw_bias);
+        let fix = prepared_ground_fix(k, obs, ray, yaw, z_target)?;
         let noise = config.noise(obs.uav);
 
-        // Eq. (15), this image's 2×2 block.
-        let q1 = SMatrix::<f64, 7, 7>::from_diagonal(&noise.tau1_variances().into());
-        let q = fix.d_nav * q1 * fix.d_nav.transpose()
-            + fix.d_yaw * noise.yaw_variance() * fix.d_yaw.transpose()
+        // Eq. (15), this image's 2×2 block. Q1 is diagonal, so
+        // (∂F/∂τ1) Q1 (∂F/∂τ1)ᵀ = Σ_j σ_j² c_j c_jᵀ over the columns c_j.
+        let mut q = fix.d_yaw * noise.yaw_variance() * fix.d_yaw.transpose()
             + Matrix2::identity() * Q_FLOOR_M2;
+        for (j, var) in noise.tau1_variances().iter().enumerate() {
+            let c = fix.d_nav.column(j);
+            q += c * c.transpose() * *var;
+        }
         let chol = q
             .cholesky()
             .ok_or(EstimatorError::SingularNormalMatrix { rcond: 0.0 })?;

@@ -82,6 +82,10 @@ pub struct SyntheticScenario {
     /// Target turn rate, degrees per second.
     pub turn_rate_deg_s: f64,
     /// T_re: the baseline constraint between consecutive images of one UAV, metres.
+    /// The biases are observable only through the UAVs' displacement between images, so
+    /// the default is as long as keeps the target in view: with 4 images per UAV the
+    /// oldest is 30 m back and the target ~166 px from its centre (100 m AGL, 60° HFOV).
+    /// `cargo run --release -p dualgeo-bench --bin baseline_sweep` shows the trade.
     pub keyframe_spacing_m: f64,
     /// Amplitude of the UAVs' true roll and pitch oscillation, degrees.
     pub sway_deg: f64,
@@ -103,7 +107,7 @@ impl Default for SyntheticScenario {
             speed_mps: 8.0,
             initial_heading_deg: 30.0,
             turn_rate_deg_s: 2.0,
-            keyframe_spacing_m: 4.0,
+            keyframe_spacing_m: 10.0,
             sway_deg: 2.0,
             image_width: 640,
             image_height: 480,
