@@ -11,7 +11,7 @@ use serde::{Deserialize, Serialize};
 /// `Q1 = diag(σx², σy², σz², σpx², σpx², σθ², σφ²)`; the yaw ψ gets `σψ²` (Q3's entry
 /// for this UAV).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
+#[serde(deny_unknown_fields, default)]
 pub struct NoiseModel {
     pub sigma_position_m: [f64; 3],
     pub sigma_pixel_px: f64,
@@ -143,5 +143,23 @@ impl EstimatorConfig {
             ));
         }
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn toml_round_trip_and_partial_tables() {
+        let text = toml::to_string(&EstimatorConfig::default()).unwrap();
+        let back: EstimatorConfig = toml::from_str(&text).unwrap();
+        assert_eq!(back, EstimatorConfig::default());
+        let partial: EstimatorConfig =
+            toml::from_str("max_iterations = 7\n[noise_right]\nsigma_pixel_px = 2.5\n").unwrap();
+        assert_eq!(partial.max_iterations, 7);
+        assert_eq!(partial.noise_right.sigma_pixel_px, 2.5);
+        assert_eq!(partial.noise_right.sigma_yaw_deg, 2.0);
+        assert!(toml::from_str::<EstimatorConfig>("max_iteratons = 7").is_err());
     }
 }

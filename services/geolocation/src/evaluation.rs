@@ -8,6 +8,7 @@ use crate::{geolocate, EstimatorConfig};
 use rand::rngs::StdRng;
 use rand::SeedableRng;
 use std::collections::BTreeMap;
+use std::time::Instant;
 
 /// MAE (eq. 33), STD and MAX of a set of errors. STD is the standard deviation of the
 /// absolute errors (the paper's tables pair it with the MAE).
@@ -74,6 +75,8 @@ pub struct MonteCarloReport {
     /// One-shot errors, one per current image (left and right).
     pub one_shot: PositionErrors,
     pub iterations: Vec<usize>,
+    /// Wall time of each `geolocate` call, nanoseconds (single thread).
+    pub solve_ns: Vec<u64>,
     /// Rejected trials by reason (`EstimatorError::kind`, or `out_of_view`).
     pub failures: BTreeMap<&'static str, usize>,
 }
@@ -106,7 +109,10 @@ pub fn monte_carlo(
                 report.one_shot.push(p, trial.target);
             }
         }
-        match geolocate(&trial.observations, config) {
+        let started = Instant::now();
+        let result = geolocate(&trial.observations, config);
+        report.solve_ns.push(started.elapsed().as_nanos() as u64);
+        match result {
             Ok(est) => {
                 report.proposed.push(est.position, trial.target);
                 for u in 0..2 {
