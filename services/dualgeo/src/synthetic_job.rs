@@ -53,6 +53,7 @@ pub fn run(args: &RunArgs) -> Result<()> {
             bail!("{name} must be finite and >= 0; got {v}");
         }
     }
+    tracing::info!(?config, "estimator configuration");
     let mut scenario = SyntheticScenario::default();
     scenario.noise.sigma_attitude_deg = args.sigma_att_deg;
     scenario.noise.sigma_position_m = args.sigma_pos_m;
@@ -60,6 +61,7 @@ pub fn run(args: &RunArgs) -> Result<()> {
         delta0_deg: args.delta0_deg,
         rate_deg_s: 0.2,
     };
+    tracing::info!(?scenario, "synthetic scenario");
 
     println!("dualgeo run: synthetic-ray mode (the image pipeline of issue #5 is not built yet)");
     println!(

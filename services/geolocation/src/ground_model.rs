@@ -12,7 +12,9 @@
 
 use crate::{EstimatorError, Observation};
 use nalgebra::{Matrix2x6, SMatrix, Vector2, Vector3};
-use shared_types::conventions::{yaw_to_world, yaw_to_world_derivative, Attitude, LevelledCamera};
+use shared_types::conventions::{
+    camera_to_world, yaw_to_world, yaw_to_world_derivative, Attitude, LevelledCamera,
+};
 
 /// ∂F/∂τ for one image: τ1 of eq. (5) (own UAV), and τ3's own yaw entry.
 pub type Matrix2x7 = SMatrix<f64, 2, 7>;
@@ -64,8 +66,7 @@ impl PreparedRay {
 
 /// The world-frame direction of the target ray of `obs` under `attitude`.
 pub fn world_ray(obs: &Observation, attitude: Attitude) -> Vector3<f64> {
-    let obs = Observation { attitude, ..*obs };
-    PreparedRay::new(&obs).direction(attitude.yaw)
+    camera_to_world(attitude) * obs.intrinsics.pixel_to_ray(obs.pixel)
 }
 
 /// Eq. (1) for image `index`: the target's (x_P, y_P) at altitude `z_target`, using

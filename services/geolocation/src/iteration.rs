@@ -180,21 +180,14 @@ mod tests {
 
     #[test]
     fn target_above_the_uav_is_rejected() {
-        // Rays pointing up (camera upside down): the rays meet above the UAVs.
+        // A GPS glitch puts the first left past image 5 m below the ground: the altitude
+        // from the other pairs is above that UAV, so eq. (1) cannot use the image.
         let mut obs = trial();
-        for o in obs.iter_mut() {
-            o.attitude.roll += std::f64::consts::PI;
-        }
-        let err = geolocate(&obs, &EstimatorConfig::default()).unwrap_err();
-        assert!(
-            matches!(
-                err,
-                EstimatorError::NoValidRayPair { .. }
-                    | EstimatorError::RayNotDownward { .. }
-                    | EstimatorError::TargetAboveUav { .. }
-            ),
-            "{err}"
-        );
+        obs[2].position.z = SyntheticScenario::default().ground_z_m - 5.0;
+        assert!(matches!(
+            geolocate(&obs, &EstimatorConfig::default()),
+            Err(EstimatorError::TargetAboveUav { index: 2, .. })
+        ));
     }
 
     #[test]
