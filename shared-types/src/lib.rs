@@ -5,4 +5,5 @@
 
 pub mod conventions;
 pub mod messages;
+pub mod nav_noise;
 pub mod service_names;

@@ -4,7 +4,7 @@
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use geolocation::evaluation::{monte_carlo, ErrorStats, MonteCarloReport};
-use geolocation::synthetic::{BiasModel, SyntheticScenario};
+use geolocation::synthetic::{BiasModel, NavNoise, SyntheticScenario};
 use geolocation::EstimatorConfig;
 use hdrhistogram::Histogram;
 use std::path::PathBuf;
@@ -55,8 +55,7 @@ pub fn run(args: &RunArgs) -> Result<()> {
     }
     tracing::info!(?config, "estimator configuration");
     let mut scenario = SyntheticScenario::default();
-    scenario.noise.sigma_attitude_deg = args.sigma_att_deg;
-    scenario.noise.sigma_position_m = args.sigma_pos_m;
+    scenario.noise = NavNoise::isotropic(args.sigma_pos_m, args.sigma_att_deg);
     scenario.bias = BiasModel::Eq34 {
         delta0_deg: args.delta0_deg,
         rate_deg_s: 0.2,

@@ -15,54 +15,7 @@ use rand::Rng;
 use rand_distr::{Distribution, Normal};
 use serde::{Deserialize, Serialize};
 use shared_types::conventions::{camera_to_world, Attitude, Intrinsics, Uav};
-
-/// How the measured yaws are biased.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-#[serde(tag = "kind", rename_all = "snake_case")]
-pub enum BiasModel {
-    /// Eq. (34): δψ_L = rate·t + δψ0, δψ_R = rate·t − δψ0 (degrees, t in seconds).
-    Eq34 { delta0_deg: f64, rate_deg_s: f64 },
-    /// Constant biases, degrees.
-    Constant { left_deg: f64, right_deg: f64 },
-}
-
-impl BiasModel {
-    /// (δψ_L, δψ_R) at time `t_s`, radians.
-    pub fn at(&self, t_s: f64) -> [f64; 2] {
-        match *self {
-            BiasModel::Eq34 {
-                delta0_deg,
-                rate_deg_s,
-            } => [
-                (rate_deg_s * t_s + delta0_deg).to_radians(),
-                (rate_deg_s * t_s - delta0_deg).to_radians(),
-            ],
-            BiasModel::Constant {
-                left_deg,
-                right_deg,
-            } => [left_deg.to_radians(), right_deg.to_radians()],
-        }
-    }
-}
-
-/// Navigation and matching noise added to the true states.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-pub struct NavNoise {
-    /// σ per position axis, metres.
-    pub sigma_position_m: f64,
-    /// σ per attitude angle (yaw, pitch, roll), degrees.
-    pub sigma_attitude_deg: f64,
-    /// σ per pixel coordinate, pixels.
-    pub sigma_pixel_px: f64,
-}
-
-impl NavNoise {
-    pub const NONE: NavNoise = NavNoise {
-        sigma_position_m: 0.0,
-        sigma_attitude_deg: 0.0,
-        sigma_pixel_px: 0.0,
-    };
-}
+pub use shared_types::nav_noise::{BiasModel, NavNoise};
 
 /// The scenario's geometry and noise.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -93,6 +46,8 @@ pub struct SyntheticScenario {
     pub image_height: u32,
     pub intrinsics: Intrinsics,
     pub noise: NavNoise,
+    /// σ per pixel coordinate of the target point (detection/matching noise), pixels.
+    pub sigma_pixel_px: f64,
     pub bias: BiasModel,
 }
 
@@ -112,11 +67,8 @@ impl Default for SyntheticScenario {
             image_width: 640,
             image_height: 480,
             intrinsics: Intrinsics::new(554.26, 554.26, 319.5, 239.5),
-            noise: NavNoise {
-                sigma_position_m: 3.0,
-                sigma_attitude_deg: 2.0,
-                sigma_pixel_px: 0.0,
-            },
+            noise: NavNoise::isotropic(3.0, 2.0),
+            sigma_pixel_px: 0.0,
             bias: BiasModel::Eq34 {
                 delta0_deg: 20.0,
                 rate_deg_s: 0.2,
@@ -215,9 +167,12 @@ impl SyntheticScenario {
         rng: &mut R,
     ) -> Result<Trial, OutOfView> {
         let target = self.target_at(t_s);
-        let pos_noise = normal(self.noise.sigma_position_m);
-        let att_noise = normal(self.noise.sigma_attitude_deg.to_radians());
-        let px_noise = normal(self.noise.sigma_pixel_px);
+        let pos_noise = self.noise.sigma_position_m.map(normal);
+        let att_noise = self
+            .noise
+            .sigma_attitude_deg
+            .map(|s| normal(s.to_radians()));
+        let px_noise = normal(self.sigma_pixel_px);
         let mut observations = Vec::with_capacity(2 * n_per_uav);
         let mut ranges_m = [0.0; 2];
         // Current pair first, then each UAV's past images newest first.
@@ -247,11 +202,15 @@ impl SyntheticScenario {
             observations.push(Observation {
                 uav,
                 position: position
-                    + Vector3::new(sample(&pos_noise), sample(&pos_noise), sample(&pos_noise)),
+                    + Vector3::new(
+                        sample(&pos_noise[0]),
+                        sample(&pos_noise[1]),
+                        sample(&pos_noise[2]),
+                    ),
                 attitude: Attitude::new(
-                    attitude.yaw + bias + sample(&att_noise),
-                    attitude.pitch + sample(&att_noise),
-                    attitude.roll + sample(&att_noise),
+                    attitude.yaw + bias + sample(&att_noise[0]),
+                    attitude.pitch + sample(&att_noise[1]),
+                    attitude.roll + sample(&att_noise[2]),
                 ),
                 pixel: pixel + Vector2::new(sample(&px_noise), sample(&px_noise)),
                 intrinsics: self.intrinsics,
