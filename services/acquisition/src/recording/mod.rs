@@ -1,0 +1,20 @@
+//! Recording format, version 1 (`docs/recording-format.md`): a reader that validates
+//! strictly and a writer whose output reads back identically.
+
+mod error;
+mod image_file;
+mod meta;
+mod reader;
+mod rows;
+mod writer;
+
+pub use error::{CsvPlace, RecordingError};
+pub use image_file::decode_image;
+pub use meta::{CameraMeta, Origin, RecordingMeta, UavMeta, UavPair, FORMAT_NAME, FORMAT_VERSION};
+pub use reader::{Recording, StereoPair};
+pub use rows::{TelemetryRow, TruthRow, TELEMETRY_HEADER, TRUTH_HEADER};
+pub use writer::{RecordingWriter, TruthSample};
+
+pub const META_FILE: &str = "recording.toml";
+pub const TELEMETRY_FILE: &str = "telemetry.csv";
+pub const TRUTH_FILE: &str = "truth.csv";

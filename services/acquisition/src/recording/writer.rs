@@ -1,0 +1,186 @@
+//! Writing a recording: images as PNG (lossless), telemetry.csv and optionally truth.csv,
+//! with floats in Rust's shortest round-trip form so the reader gets back exactly what
+//! was written.
+
+use super::rows::{
+    telemetry_record, truth_record, TelemetryRow, TruthRow, TELEMETRY_HEADER, TRUTH_HEADER,
+};
+use super::{RecordingError, RecordingMeta, META_FILE, TELEMETRY_FILE, TRUTH_FILE};
+use opencv::core as cv;
+use opencv::prelude::*;
+use shared_types::conventions::Uav;
+use shared_types::messages::PoseSample;
+use std::fs::File;
+use std::path::{Path, PathBuf};
+
+/// The truth that goes with one image.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TruthSample {
+    pub pose: PoseSample,
+    pub target: [f64; 3],
+    pub target_px: Option<[f64; 2]>,
+}
+
+pub struct RecordingWriter {
+    root: PathBuf,
+    meta: RecordingMeta,
+    telemetry: csv::Writer<File>,
+    truth: Option<csv::Writer<File>>,
+    next_frame: [u64; 2],
+    last_t: [Option<f64>; 2],
+    png_params: cv::Vector<i32>,
+}
+
+fn write_err(path: &Path, message: impl std::fmt::Display) -> RecordingError {
+    RecordingError::Write {
+        path: path.into(),
+        message: message.to_string(),
+    }
+}
+
+impl RecordingWriter {
+    /// Creates `root` (which must not exist, or be an empty folder) with its metadata.
+    pub fn create(
+        root: impl AsRef<Path>,
+        meta: &RecordingMeta,
+        with_truth: bool,
+    ) -> Result<Self, RecordingError> {
+        let root = root.as_ref().to_path_buf();
+        meta.validate().map_err(|m| write_err(&root, m))?;
+        if root.exists() {
+            let mut entries = std::fs::read_dir(&root).map_err(|e| RecordingError::io(&root, e))?;
+            if entries.next().is_some() {
+                return Err(write_err(&root, "output folder exists and is not empty"));
+            }
+        }
+        for folder in [&meta.uav.left.frames, &meta.uav.right.frames] {
+            let dir = root.join(folder);
+            std::fs::create_dir_all(&dir).map_err(|e| RecordingError::io(&dir, e))?;
+        }
+        let meta_path = root.join(META_FILE);
+        std::fs::write(&meta_path, meta.to_toml())
+            .map_err(|e| RecordingError::io(&meta_path, e))?;
+        let open = |name: &str, header: &[&str]| -> Result<csv::Writer<File>, RecordingError> {
+            let path = root.join(name);
+            let mut w = csv::Writer::from_path(&path).map_err(|e| write_err(&path, e))?;
+            w.write_record(header).map_err(|e| write_err(&path, e))?;
+            Ok(w)
+        };
+        let telemetry = open(TELEMETRY_FILE, &TELEMETRY_HEADER)?;
+        let truth = with_truth
+            .then(|| open(TRUTH_FILE, &TRUTH_HEADER))
+            .transpose()?;
+        Ok(Self {
+            root,
+            meta: meta.clone(),
+            telemetry,
+            truth,
+            next_frame: [0; 2],
+            last_t: [None; 2],
+            png_params: cv::Vector::from_slice(&[opencv::imgcodecs::IMWRITE_PNG_COMPRESSION, 1]),
+        })
+    }
+
+    pub fn root(&self) -> &Path {
+        &self.root
+    }
+
+    /// Writes one image of `uav` taken at `t_s` with its measured pose (and truth).
+    pub fn write_frame(
+        &mut self,
+        uav: Uav,
+        t_s: f64,
+        measured: PoseSample,
+        image: &cv::Mat,
+        truth: Option<&TruthSample>,
+    ) -> Result<TelemetryRow, RecordingError> {
+        let camera = self.meta.uav(uav).camera;
+        let frame = self.next_frame[uav.index()];
+        let file = format!("{}/{frame:06}.png", self.meta.uav(uav).frames);
+        let path = self.root.join(&file);
+        if (image.cols() as u32, image.rows() as u32) != (camera.width, camera.height)
+            || image.depth() != cv::CV_8U
+            || !(image.channels() == 1 || image.channels() == 3)
+        {
+            return Err(write_err(
+                &path,
+                format!(
+                    "image must be 8-bit grey or BGR {}x{}, got {}x{} with {} channels",
+                    camera.width,
+                    camera.height,
+                    image.cols(),
+                    image.rows(),
+                    image.channels()
+                ),
+            ));
+        }
+        if !t_s.is_finite() || self.last_t[uav.index()].is_some_and(|last| t_s <= last) {
+            return Err(write_err(
+                &path,
+                format!("timestamp {t_s} does not increase"),
+            ));
+        }
+        if !measured.is_finite()
+            || truth.is_some_and(|t| {
+                !t.pose.is_finite()
+                    || !t
+                        .target
+                        .iter()
+                        .chain(t.target_px.iter().flatten())
+                        .all(|v| v.is_finite())
+            })
+        {
+            return Err(write_err(&path, "pose or truth is not finite"));
+        }
+        if truth.is_some() != self.truth.is_some() {
+            return Err(write_err(
+                &path,
+                "truth given to a writer created without truth.csv, or missing",
+            ));
+        }
+        let mut png = cv::Vector::<u8>::new();
+        opencv::imgcodecs::imencode(".png", image, &mut png, &self.png_params)
+            .map_err(|e| write_err(&path, e.message))?;
+        std::fs::write(&path, png.as_slice()).map_err(|e| RecordingError::io(&path, e))?;
+
+        let row = TelemetryRow {
+            uav,
+            frame,
+            file,
+            t_s,
+            pose: measured,
+        };
+        let telemetry_path = self.root.join(TELEMETRY_FILE);
+        self.telemetry
+            .write_record(telemetry_record(&row))
+            .map_err(|e| write_err(&telemetry_path, e))?;
+        if let (Some(w), Some(t)) = (self.truth.as_mut(), truth) {
+            let truth_row = TruthRow {
+                uav,
+                frame,
+                t_s,
+                pose: t.pose,
+                target: t.target,
+                target_px: t.target_px,
+            };
+            w.write_record(truth_record(&truth_row))
+                .map_err(|e| write_err(&self.root.join(TRUTH_FILE), e))?;
+        }
+        self.next_frame[uav.index()] += 1;
+        self.last_t[uav.index()] = Some(t_s);
+        Ok(row)
+    }
+
+    /// Flushes the CSV files. Dropping the writer without `finish` may lose rows.
+    pub fn finish(mut self) -> Result<(), RecordingError> {
+        let telemetry_path = self.root.join(TELEMETRY_FILE);
+        self.telemetry
+            .flush()
+            .map_err(|e| RecordingError::io(&telemetry_path, e))?;
+        if let Some(w) = self.truth.as_mut() {
+            w.flush()
+                .map_err(|e| RecordingError::io(self.root.join(TRUTH_FILE), e))?;
+        }
+        Ok(())
+    }
+}
