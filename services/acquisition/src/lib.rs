@@ -5,3 +5,4 @@
 //! binary lands with issue #5.
 
 pub mod recording;
+pub mod sim;

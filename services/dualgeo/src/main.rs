@@ -1,10 +1,11 @@
 //! `dualgeo`: the ground station's command line.
 //!
-//! Today it has one subcommand, `run`. Until the image pipeline lands (issue #5) `run`
+//! `simulate` renders a scenario preset into a recording. Until the image pipeline lands (issue #5) `run`
 //! exercises the estimator on the built-in synthetic scenario (exact rays with the
 //! paper's navigation noise) and prints accuracy and solve time beside the one-shot
 //! baseline.
 
+mod simulate;
 mod synthetic_job;
 
 use anyhow::Result;
@@ -26,6 +27,8 @@ struct Cli {
 enum Command {
     /// Run the main job on the built-in default scenario.
     Run(synthetic_job::RunArgs),
+    /// Render a simulator preset into a recording.
+    Simulate(simulate::SimulateArgs),
 }
 
 fn main() -> Result<()> {
@@ -37,5 +40,6 @@ fn main() -> Result<()> {
         .init();
     match Cli::parse().command {
         Command::Run(args) => synthetic_job::run(&args),
+        Command::Simulate(args) => simulate::run(&args),
     }
 }

@@ -54,11 +54,13 @@ pub fn run(args: &RunArgs) -> Result<()> {
         }
     }
     tracing::info!(?config, "estimator configuration");
-    let mut scenario = SyntheticScenario::default();
-    scenario.noise = NavNoise::isotropic(args.sigma_pos_m, args.sigma_att_deg);
-    scenario.bias = BiasModel::Eq34 {
-        delta0_deg: args.delta0_deg,
-        rate_deg_s: 0.2,
+    let scenario = SyntheticScenario {
+        noise: NavNoise::isotropic(args.sigma_pos_m, args.sigma_att_deg),
+        bias: BiasModel::Eq34 {
+            delta0_deg: args.delta0_deg,
+            rate_deg_s: 0.2,
+        },
+        ..SyntheticScenario::default()
     };
     tracing::info!(?scenario, "synthetic scenario");
 

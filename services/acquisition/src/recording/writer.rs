@@ -94,10 +94,15 @@ impl RecordingWriter {
         image: &cv::Mat,
         truth: Option<&TruthSample>,
     ) -> Result<TelemetryRow, RecordingError> {
+        let png = self.encode(uav, image)?;
+        self.write_encoded_frame(uav, t_s, measured, &png, truth)
+    }
+
+    /// Checks `image` against `uav`'s camera and encodes it as PNG. Takes `&self`, so
+    /// both UAVs' frames can be encoded at once on two threads.
+    pub fn encode(&self, uav: Uav, image: &cv::Mat) -> Result<Vec<u8>, RecordingError> {
         let camera = self.meta.uav(uav).camera;
-        let frame = self.next_frame[uav.index()];
-        let file = format!("{}/{frame:06}.png", self.meta.uav(uav).frames);
-        let path = self.root.join(&file);
+        let path = self.root.join(&self.meta.uav(uav).frames);
         if (image.cols() as u32, image.rows() as u32) != (camera.width, camera.height)
             || image.depth() != cv::CV_8U
             || !(image.channels() == 1 || image.channels() == 3)
@@ -114,6 +119,25 @@ impl RecordingWriter {
                 ),
             ));
         }
+        let mut png = cv::Vector::<u8>::new();
+        opencv::imgcodecs::imencode(".png", image, &mut png, &self.png_params)
+            .map_err(|e| write_err(&path, e.message))?;
+        Ok(png.to_vec())
+    }
+
+    /// [`RecordingWriter::write_frame`] for an image already encoded by
+    /// [`RecordingWriter::encode`].
+    pub fn write_encoded_frame(
+        &mut self,
+        uav: Uav,
+        t_s: f64,
+        measured: PoseSample,
+        png: &[u8],
+        truth: Option<&TruthSample>,
+    ) -> Result<TelemetryRow, RecordingError> {
+        let frame = self.next_frame[uav.index()];
+        let file = format!("{}/{frame:06}.png", self.meta.uav(uav).frames);
+        let path = self.root.join(&file);
         if !t_s.is_finite() || self.last_t[uav.index()].is_some_and(|last| t_s <= last) {
             return Err(write_err(
                 &path,
@@ -138,10 +162,7 @@ impl RecordingWriter {
                 "truth given to a writer created without truth.csv, or missing",
             ));
         }
-        let mut png = cv::Vector::<u8>::new();
-        opencv::imgcodecs::imencode(".png", image, &mut png, &self.png_params)
-            .map_err(|e| write_err(&path, e.message))?;
-        std::fs::write(&path, png.as_slice()).map_err(|e| RecordingError::io(&path, e))?;
+        std::fs::write(&path, png).map_err(|e| RecordingError::io(&path, e))?;
 
         let row = TelemetryRow {
             uav,

@@ -1,0 +1,33 @@
+//! The urban-scene simulator: a procedural town rendered with exact perspective and
+//! occlusion, a vehicle driving its roads, two nadir UAVs following it, and their
+//! measured navigation states with Gaussian noise and yaw biases (eq. 34).
+//!
+//! [`Simulator`] is a live source: the acquisition service (and `dualgeo simulate`) step
+//! it frame by frame and render straight into their own buffers.
+
+pub mod city;
+pub mod motion;
+pub mod record;
+pub mod render;
+pub mod scenario;
+pub mod simulator;
+pub mod texture;
+
+pub use record::{record, RecordSummary};
+pub use scenario::{Presets, SimConfig};
+pub use simulator::{SimFrame, SimStep, Simulator};
+
+use crate::recording::RecordingError;
+
+#[derive(Debug, thiserror::Error)]
+pub enum SimError {
+    #[error("{0}")]
+    Config(String),
+    #[error("ground image {path}: {reason}")]
+    GroundImage {
+        path: std::path::PathBuf,
+        reason: String,
+    },
+    #[error(transparent)]
+    Recording(#[from] RecordingError),
+}

@@ -1,0 +1,262 @@
+//! Simulator configuration and the presets file (`presets/scenarios.toml`, built in;
+//! users pass their own copy with `--presets`).
+
+use super::city::CityConfig;
+use super::motion::{DrivingSpec, FlightSpec};
+use super::SimError;
+use crate::recording::Origin;
+use serde::{Deserialize, Serialize};
+use shared_types::nav_noise::{BiasModel, NavNoise};
+use std::path::PathBuf;
+
+/// The presets shipped with dualgeo.
+pub const BUILTIN_PRESETS: &str = include_str!("../../presets/scenarios.toml");
+
+/// Largest frame the simulator renders (the transport benchmarks' 4K).
+pub const MAX_WIDTH: u32 = 3840;
+pub const MAX_HEIGHT: u32 = 2160;
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SimConfig {
+    pub description: String,
+    /// Seed of the navigation noise.
+    pub seed: u64,
+    pub duration_s: f64,
+    pub frame_rate_hz: f64,
+    pub camera: SimCamera,
+    pub flight: FlightSpec,
+    pub vehicle: VehicleSize,
+    pub driving: DrivingSpec,
+    pub city: CityConfig,
+    pub noise: NavNoise,
+    pub bias: BiasModel,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub origin: Option<Origin>,
+    /// Optional orthophoto (PNG/JPEG) stretched over the town's ground instead of the
+    /// procedural texture.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub ground_image: Option<PathBuf>,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SimCamera {
+    pub width: u32,
+    pub height: u32,
+    pub hfov_deg: f64,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct VehicleSize {
+    pub length_m: f64,
+    pub width_m: f64,
+    pub height_m: f64,
+}
+
+impl SimConfig {
+    pub fn validate(&self) -> Result<(), SimError> {
+        let bad = |m: String| Err(SimError::Config(m));
+        let positive = |v: f64| v.is_finite() && v > 0.0;
+        let non_negative = |v: f64| v.is_finite() && v >= 0.0;
+        if !positive(self.duration_s) || !positive(self.frame_rate_hz) {
+            return bad("duration_s and frame_rate_hz must be > 0".into());
+        }
+        let c = &self.camera;
+        if !(16..=MAX_WIDTH).contains(&c.width) || !(16..=MAX_HEIGHT).contains(&c.height) {
+            return bad(format!(
+                "camera size {}x{} outside 16x16 ..= {MAX_WIDTH}x{MAX_HEIGHT}",
+                c.width, c.height
+            ));
+        }
+        let hfov_ok = c.hfov_deg > 5.0 && c.hfov_deg < 150.0;
+        if !hfov_ok {
+            return bad(format!("camera hfov_deg {} outside (5, 150)", c.hfov_deg));
+        }
+        let f = &self.flight;
+        let flight_ok = positive(f.altitude_agl_m)
+            && non_negative(f.separation_m)
+            && positive(f.follow_time_constant_s)
+            && f.wobble_deg.abs() < 10.0;
+        if !flight_ok {
+            return bad("flight needs altitude_agl_m > 0, separation_m >= 0, follow_time_constant_s > 0, |wobble_deg| < 10".into());
+        }
+        let v = &self.vehicle;
+        if !positive(v.length_m)
+            || !positive(v.width_m)
+            || !positive(v.height_m)
+            || v.height_m >= f.altitude_agl_m
+        {
+            return bad("vehicle dimensions must be > 0 and below the UAVs".into());
+        }
+        if !self.noise.is_valid() {
+            return bad("noise σ's must be finite and >= 0".into());
+        }
+        let city = &self.city;
+        let city_ok = positive(city.block_m)
+            && positive(city.half_extent_m)
+            && positive(city.ground_metres_per_texel)
+            && non_negative(city.road_width_m)
+            && non_negative(city.sidewalk_m)
+            && city.ground_z_m.is_finite();
+        if !city_ok {
+            return bad("city dimensions must be finite and > 0".into());
+        }
+        if (2.0 * city.half_extent_m / city.ground_metres_per_texel) > 8192.0 {
+            return bad("city ground texture would exceed 8192 texels a side: raise ground_metres_per_texel".into());
+        }
+        Ok(())
+    }
+
+    /// Frames per UAV over the duration.
+    pub fn frame_count(&self) -> u64 {
+        (self.duration_s * self.frame_rate_hz).round() as u64
+    }
+}
+
+/// A presets file: named tables, each a full [`SimConfig`] or a `base` plus overrides.
+pub struct Presets {
+    table: toml::Table,
+    source: String,
+}
+
+impl Presets {
+    pub fn builtin() -> Self {
+        Self::parse(BUILTIN_PRESETS, "built-in presets").expect("built-in presets parse")
+    }
+
+    pub fn from_file(path: &std::path::Path) -> Result<Self, SimError> {
+        let text = std::fs::read_to_string(path)
+            .map_err(|e| SimError::Config(format!("{}: {e}", path.display())))?;
+        Self::parse(&text, &path.display().to_string())
+    }
+
+    fn parse(text: &str, source: &str) -> Result<Self, SimError> {
+        let table: toml::Table = text
+            .parse()
+            .map_err(|e: toml::de::Error| SimError::Config(format!("{source}: {e}")))?;
+        Ok(Self {
+            table,
+            source: source.into(),
+        })
+    }
+
+    pub fn names(&self) -> Vec<&str> {
+        self.table.keys().map(String::as_str).collect()
+    }
+
+    /// The preset `name`, with its `base` chain merged, as TOML.
+    pub fn resolved_toml(&self, name: &str) -> Result<toml::Table, SimError> {
+        let mut chain = vec![name.to_string()];
+        let mut current = self.lookup(name)?;
+        let mut layers = vec![current.clone()];
+        while let Some(base) = current.get("base") {
+            let base = base
+                .as_str()
+                .ok_or_else(|| self.err(name, "`base` must be a preset name"))?
+                .to_string();
+            if chain.contains(&base) {
+                return Err(self.err(
+                    name,
+                    &format!("`base` chain loops: {} -> {base}", chain.join(" -> ")),
+                ));
+            }
+            chain.push(base.clone());
+            current = self.lookup(&base)?;
+            layers.push(current.clone());
+        }
+        let mut merged = toml::Table::new();
+        for layer in layers.into_iter().rev() {
+            merge(&mut merged, layer);
+        }
+        merged.remove("base");
+        Ok(merged)
+    }
+
+    pub fn get(&self, name: &str) -> Result<SimConfig, SimError> {
+        let merged = self.resolved_toml(name)?;
+        let config: SimConfig = toml::Value::Table(merged)
+            .try_into()
+            .map_err(|e: toml::de::Error| self.err(name, e.message()))?;
+        config
+            .validate()
+            .map_err(|e| self.err(name, &e.to_string()))?;
+        Ok(config)
+    }
+
+    fn lookup(&self, name: &str) -> Result<toml::Table, SimError> {
+        match self.table.get(name) {
+            Some(toml::Value::Table(t)) => Ok(t.clone()),
+            Some(_) => Err(self.err(name, "is not a table")),
+            None => Err(SimError::Config(format!(
+                "{}: no preset \"{name}\" (have: {})",
+                self.source,
+                self.names().join(", ")
+            ))),
+        }
+    }
+
+    fn err(&self, name: &str, message: &str) -> SimError {
+        SimError::Config(format!("{} preset \"{name}\": {message}", self.source))
+    }
+}
+
+/// Overlays `top` on `into`: tables merge key by key, except tagged tables (with a
+/// `kind` key, e.g. `bias`), which replace the base's table whole.
+fn merge(into: &mut toml::Table, top: toml::Table) {
+    for (k, v) in top {
+        match (into.get_mut(&k), v) {
+            (Some(toml::Value::Table(base)), toml::Value::Table(over))
+                if !over.contains_key("kind") =>
+            {
+                merge(base, over)
+            }
+            (_, v) => {
+                into.insert(k, v);
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_builtin_preset_resolves_and_validates() {
+        let p = Presets::builtin();
+        assert!(p.names().len() >= 23);
+        for name in p.names() {
+            p.get(name).unwrap_or_else(|e| panic!("{name}: {e}"));
+        }
+        let t1 = p.get("table1").unwrap();
+        assert_eq!(t1.noise, NavNoise::NONE);
+        assert_eq!(t1.bias, BiasModel::NONE);
+        assert_eq!(t1.city, p.get("default").unwrap().city);
+        let f12 = p.get("fig12_bias30").unwrap();
+        assert_eq!(
+            f12.bias,
+            BiasModel::Eq34 {
+                delta0_deg: 30.0,
+                rate_deg_s: 0.2
+            }
+        );
+        assert_eq!(f12.noise, NavNoise::isotropic(3.0, 2.0));
+    }
+
+    #[test]
+    fn unknown_keys_missing_presets_and_loops_are_errors() {
+        let p = Presets::parse("[a]\nbase = \"b\"\n[b]\nbase = \"a\"\n", "test").unwrap();
+        assert!(p.get("a").unwrap_err().to_string().contains("loops"));
+        assert!(Presets::builtin()
+            .get("nope")
+            .unwrap_err()
+            .to_string()
+            .contains("no preset \"nope\""));
+        let text = format!("{BUILTIN_PRESETS}\n[typo]\nbase = \"default\"\nduration = 3.0\n");
+        let p = Presets::parse(&text, "test").unwrap();
+        let e = p.get("typo").unwrap_err().to_string();
+        assert!(e.contains("typo") && e.contains("duration"), "{e}");
+    }
+}
