@@ -11,22 +11,29 @@ pub struct Texture {
 }
 
 impl Texture {
-    /// Fills a `width × height` texture from `texel(x_m, y_m) -> BGR`.
+    /// Fills a `width × height` texture from `texel(x_m, y_m) -> BGR`, rows split over
+    /// all cores; `texel` must be a pure function of its position.
     pub fn generate(
         width: usize,
         height: usize,
         metres_per_texel: f64,
-        mut texel: impl FnMut(f64, f64) -> [u8; 3],
+        texel: impl Fn(f64, f64) -> [u8; 3] + Sync,
     ) -> Self {
-        let mut data = Vec::with_capacity(width * height * 3);
-        for row in 0..height {
-            for col in 0..width {
-                data.extend(texel(
-                    col as f64 * metres_per_texel,
-                    row as f64 * metres_per_texel,
-                ));
+        let mut data = vec![0u8; width * height * 3];
+        let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
+        let rows_per_chunk = height.div_ceil(threads).max(1);
+        std::thread::scope(|s| {
+            for (chunk, rows) in data.chunks_mut(rows_per_chunk * width * 3).enumerate() {
+                let texel = &texel;
+                s.spawn(move || {
+                    for (k, px) in rows.chunks_exact_mut(3).enumerate() {
+                        let (row, col) = (chunk * rows_per_chunk + k / width, k % width);
+                        let (x, y) = (col as f64 * metres_per_texel, row as f64 * metres_per_texel);
+                        px.copy_from_slice(&texel(x, y));
+                    }
+                });
             }
-        }
+        });
         Self {
             width,
             height,

@@ -1,0 +1,120 @@
+//! End-to-end: `dualgeo simulate` as a user runs it.
+
+use std::process::{Command, Output};
+
+fn dualgeo(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_dualgeo"))
+        .args(args)
+        .output()
+        .expect("spawn dualgeo")
+}
+
+fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+fn stdout(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stdout).into_owned()
+}
+
+/// A scratch folder removed when dropped, even if the test fails.
+struct Scratch(std::path::PathBuf);
+
+impl Scratch {
+    fn new(name: &str) -> Self {
+        let p = std::env::temp_dir().join(format!("dualgeo-e2e-{}-{name}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&p);
+        Self(p)
+    }
+}
+
+impl Drop for Scratch {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.0);
+    }
+}
+
+#[test]
+fn simulate_writes_a_valid_recording() {
+    let out = Scratch::new("sim");
+    let o = dualgeo(&[
+        "simulate",
+        "--preset",
+        "default",
+        "--duration-s",
+        "0.5",
+        "--out",
+        out.0.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(stdout(&o).contains("15 stereo pairs"), "{}", stdout(&o));
+    let telemetry = std::fs::read_to_string(out.0.join("telemetry.csv")).unwrap();
+    assert_eq!(telemetry.lines().count(), 31);
+    assert!(telemetry.starts_with("uav,frame,file,t_s,x_m,y_m,z_m,yaw_deg,pitch_deg,roll_deg\n"));
+    let meta = std::fs::read_to_string(out.0.join("recording.toml")).unwrap();
+    assert!(
+        meta.contains("format = \"dual-uav-recording\"") && meta.contains("[origin]"),
+        "{meta}"
+    );
+    assert!(out.0.join("left/000014.png").is_file() && out.0.join("right/000014.png").is_file());
+
+    // Writing into the same, now non-empty, folder is refused and nothing is lost.
+    let again = dualgeo(&[
+        "simulate",
+        "--duration-s",
+        "0.2",
+        "--out",
+        out.0.to_str().unwrap(),
+    ]);
+    assert!(!again.status.success());
+    assert!(stderr(&again).contains("not empty"), "{}", stderr(&again));
+    assert!(out.0.join("left/000014.png").is_file());
+}
+
+#[test]
+fn presets_can_be_listed_printed_and_are_checked() {
+    let o = dualgeo(&["simulate", "--list"]);
+    assert!(o.status.success());
+    for name in [
+        "default",
+        "table1",
+        "table2",
+        "fig9_att5",
+        "fig10_pos1",
+        "fig11_both3",
+        "fig12_bias30",
+    ] {
+        assert!(
+            stdout(&o).lines().any(|l| l.starts_with(name)),
+            "{name} missing from:\n{}",
+            stdout(&o)
+        );
+    }
+    let o = dualgeo(&["simulate", "--preset", "fig12_bias25", "--print"]);
+    assert!(o.status.success());
+    assert!(stdout(&o).contains("delta0_deg = 25.0"), "{}", stdout(&o));
+
+    let o = dualgeo(&["simulate", "--preset", "nope", "--out", "/nonexistent"]);
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("no preset \"nope\""), "{}", stderr(&o));
+
+    let bad = Scratch::new("presets.toml");
+    std::fs::write(&bad.0, "[mine]\nbase = \"default\"\n").unwrap();
+    let o = dualgeo(&[
+        "simulate",
+        "--presets",
+        bad.0.to_str().unwrap(),
+        "--preset",
+        "mine",
+        "--print",
+    ]);
+    assert!(
+        !o.status.success(),
+        "a preset file without the base it names must fail"
+    );
+    assert!(
+        stderr(&o).contains("no preset \"default\""),
+        "{}",
+        stderr(&o)
+    );
+}
