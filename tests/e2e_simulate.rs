@@ -58,6 +58,28 @@ fn simulate_writes_a_valid_recording() {
     );
     assert!(out.0.join("left/000014.png").is_file() && out.0.join("right/000014.png").is_file());
 
+    let v = dualgeo(&["validate", out.0.to_str().unwrap()]);
+    assert!(v.status.success(), "{}", stderr(&v));
+    assert!(
+        stdout(&v).contains("15 left and 15 right images, 15 stereo pairs")
+            && stdout(&v).contains("truth yes"),
+        "{}",
+        stdout(&v)
+    );
+
+    // A corrupt image is found by validate, named, and the exit code says so.
+    let png = out.0.join("right/000007.png");
+    let original = std::fs::read(&png).unwrap();
+    std::fs::write(&png, &original[..original.len() / 3]).unwrap();
+    let v = dualgeo(&["validate", out.0.to_str().unwrap()]);
+    assert!(!v.status.success());
+    assert!(
+        stderr(&v).contains("right/000007.png") && stderr(&v).contains("truncated PNG"),
+        "{}",
+        stderr(&v)
+    );
+    std::fs::write(&png, original).unwrap();
+
     // Writing into the same, now non-empty, folder is refused and nothing is lost.
     let again = dualgeo(&[
         "simulate",

@@ -309,3 +309,39 @@ fn measured_states_follow_the_noise_model_and_eq34() {
         );
     }
 }
+
+#[test]
+fn a_user_orthophoto_replaces_the_procedural_ground() {
+    let dir = TempDir::new().unwrap();
+    let photo = dir.path().join("ortho.png");
+    let colour = cv::Scalar::new(10.0, 200.0, 30.0, 0.0);
+    let img = cv::Mat::new_rows_cols_with_default(64, 64, cv::CV_8UC3, colour).unwrap();
+    opencv::imgcodecs::imwrite_def(photo.to_str().unwrap(), &img).unwrap();
+    let mut config = preset("table1");
+    config.ground_image = Some(photo);
+    let mut sim = Simulator::new(config.clone()).unwrap();
+    let step = sim.step().unwrap();
+    let (mut l, _, stride) = buffers(&config);
+    sim.render(&step, Uav::Left, &mut l, stride);
+    let renderer = sim.renderer(Uav::Left);
+    let mut ground = 0;
+    for v in (0..480).step_by(7) {
+        for u in (0..640).step_by(7) {
+            if renderer.surface(u, v) == Surface::Ground {
+                assert_eq!(
+                    &l[v * stride + 3 * u..v * stride + 3 * u + 3],
+                    &[10, 200, 30]
+                );
+                ground += 1;
+            }
+        }
+    }
+    assert!(ground > 100);
+
+    config.ground_image = Some(dir.path().join("missing.png"));
+    let err = Simulator::new(config)
+        .err()
+        .expect("missing orthophoto must fail")
+        .to_string();
+    assert!(err.contains("missing.png"), "{err}");
+}

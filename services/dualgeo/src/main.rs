@@ -7,6 +7,7 @@
 
 mod simulate;
 mod synthetic_job;
+mod validate;
 
 use anyhow::Result;
 use clap::{Parser, Subcommand};
@@ -29,6 +30,8 @@ enum Command {
     Run(synthetic_job::RunArgs),
     /// Render a simulator preset into a recording.
     Simulate(simulate::SimulateArgs),
+    /// Check a recording completely (every row and every image).
+    Validate(validate::ValidateArgs),
 }
 
 fn main() -> Result<()> {
@@ -41,5 +44,6 @@ fn main() -> Result<()> {
     match Cli::parse().command {
         Command::Run(args) => synthetic_job::run(&args),
         Command::Simulate(args) => simulate::run(&args),
+        Command::Validate(args) => validate::run(&args),
     }
 }

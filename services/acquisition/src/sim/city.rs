@@ -51,6 +51,8 @@ pub struct Building {
 pub struct City {
     pub config: CityConfig,
     pub buildings: Vec<Building>,
+    /// Height of the tallest building, metres (bounds the footprint the renderer culls to).
+    pub tallest_m: f64,
     pub ground: Texture,
     pub roof: Texture,
     pub facade: Texture,
@@ -60,6 +62,7 @@ impl City {
     pub fn generate(config: CityConfig) -> Self {
         let buildings = layout_buildings(&config);
         Self {
+            tallest_m: buildings.iter().map(|b| b.height_m).fold(0.0, f64::max),
             ground: ground_texture(&config, &buildings),
             roof: roof_texture(config.seed),
             facade: facade_texture(config.seed),

@@ -169,7 +169,7 @@ impl Renderer {
         self.faces.clear();
         let zg = city.config.ground_z_m;
         let cam = view.position;
-        let (lo, hi) = footprint(view, zg, zg + city.tallest_m().max(5.0));
+        let (lo, hi) = footprint(view, zg, zg + city.tallest_m.max(5.0));
         for (i, b) in city.buildings.iter().enumerate() {
             if b.max[0] < lo[0] || b.min[0] > hi[0] || b.max[1] < lo[1] || b.min[1] > hi[1] {
                 continue;
@@ -272,34 +272,12 @@ impl Renderer {
             let k_ = &view.intrinsics;
             s[k] = [k_.fx * pc.x / pc.z + k_.cx, k_.fy * pc.y / pc.z + k_.cy];
         }
-        let (w, h) = (view.width as f64, view.height as f64);
-        let min_u = s
-            .iter()
-            .map(|p| p[0])
-            .fold(f64::INFINITY, f64::min)
-            .ceil()
-            .max(0.0);
-        let max_u = s
-            .iter()
-            .map(|p| p[0])
-            .fold(f64::NEG_INFINITY, f64::max)
-            .floor()
-            .min(w - 1.0);
-        let min_v = s
-            .iter()
-            .map(|p| p[1])
-            .fold(f64::INFINITY, f64::min)
-            .ceil()
-            .max(0.0);
-        let max_v = s
-            .iter()
-            .map(|p| p[1])
-            .fold(f64::NEG_INFINITY, f64::max)
-            .floor()
-            .min(h - 1.0);
-        if min_u > max_u || min_v > max_v {
+        let Some((min_u, max_u)) = pixel_span(s.map(|p| p[0]), view.width) else {
             return;
-        }
+        };
+        let Some((min_v, max_v)) = pixel_span(s.map(|p| p[1]), view.height) else {
+            return;
+        };
         // Twice the signed area gives the winding; edge functions are then ≥ 0 inside.
         let area: f64 = (0..4)
             .map(|i| {
@@ -327,9 +305,9 @@ impl Renderer {
         let (na, nb, nc) = (n.dot(&basis[0]), n.dot(&basis[1]), n.dot(&basis[2]));
         let label = index as u32;
         let width = self.width;
-        for v in min_v as usize..=max_v as usize {
+        for v in min_v..=max_v {
             let vf = v as f64;
-            for u in min_u as usize..=max_u as usize {
+            for u in min_u..=max_u {
                 let uf = u as f64;
                 if edges.iter().any(|e| e[0] * uf + e[1] * vf + e[2] < 0.0) {
                     continue;
@@ -371,9 +349,10 @@ impl Renderer {
                         shade_face(city, &self.faces[face as usize].material, p, zg)
                     }
                 };
-                row[3 * u] = bgr[0].clamp(0.0, 255.0) as u8;
-                row[3 * u + 1] = bgr[1].clamp(0.0, 255.0) as u8;
-                row[3 * u + 2] = bgr[2].clamp(0.0, 255.0) as u8;
+                // Round to nearest; `as` saturates at 0 and 255.
+                row[3 * u] = (bgr[0] + 0.5) as u8;
+                row[3 * u + 1] = (bgr[1] + 0.5) as u8;
+                row[3 * u + 2] = (bgr[2] + 0.5) as u8;
             }
         }
     }
@@ -417,6 +396,23 @@ fn shade_face(city: &City, material: &Material, p: Vector3<f64>, zg: f64) -> [f3
         Material::VehicleTop => VEHICLE_TOP_BGR.map(f32::from),
         Material::VehicleSide { light } => VEHICLE_SIDE_BGR.map(|c| c as f32 * light),
     }
+}
+
+/// The pixel centres (0..size) whose coordinate lies within the span of `coords`.
+fn pixel_span(coords: [f64; 4], size: u32) -> Option<(usize, usize)> {
+    let lo = coords
+        .iter()
+        .copied()
+        .fold(f64::INFINITY, f64::min)
+        .ceil()
+        .max(0.0);
+    let hi = coords
+        .iter()
+        .copied()
+        .fold(f64::NEG_INFINITY, f64::max)
+        .floor()
+        .min(size as f64 - 1.0);
+    (lo <= hi).then_some((lo as usize, hi as usize))
 }
 
 /// Axis-aligned bounds of the ground footprint of the view between altitudes `z_lo` and
