@@ -1,25 +1,57 @@
 //! # detection
 //!
-//! The `Detector` trait, the classical and ONNX (OpenCV DNN) detectors and the detection
-//! service land with issues #4 and #5. Until then this crate only checks that the OpenCV
-//! modules it needs are linked.
+//! Finding the target in a frame: the [`Detector`] trait, the classical colour-blob
+//! detector ([`ColourBlobDetector`], the default) and the YOLO detector over OpenCV DNN
+//! ([`yolo`]). Detectors see pixels only, never truth.
+
+mod colour_blob;
+pub mod yolo;
+
+pub use colour_blob::{ColourBlobConfig, ColourBlobDetector};
 
 use opencv::core as cv;
 
-/// The OpenCV version the crate was built against (e.g. "4.6.0").
-pub fn opencv_version() -> String {
-    format!(
-        "{}.{}.{}",
-        cv::CV_VERSION_MAJOR,
-        cv::CV_VERSION_MINOR,
-        cv::CV_VERSION_REVISION
-    )
+/// The target in one frame.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Detection {
+    /// Bounding box: left, top, width, height in pixels.
+    pub bbox: [f64; 4],
+    /// The target point's pixel (OpenCV convention: (0, 0) is the top-left pixel's centre).
+    pub centre: [f64; 2],
+    /// In [0, 1].
+    pub confidence: f32,
 }
 
-#[cfg(test)]
-mod tests {
-    #[test]
-    fn built_against_opencv_4() {
-        assert!(super::opencv_version().starts_with("4."));
+#[derive(Debug, thiserror::Error)]
+pub enum DetectError {
+    #[error("frame must be 8-bit BGR (3 channels), got {channels} channels of depth {depth}")]
+    BadFrame { channels: i32, depth: i32 },
+    #[error("invalid detector configuration: {0}")]
+    Config(String),
+    #[error("model {path}: {reason}")]
+    Model { path: String, reason: String },
+    #[error("OpenCV: {0}")]
+    OpenCv(String),
+}
+
+impl From<opencv::Error> for DetectError {
+    fn from(e: opencv::Error) -> Self {
+        DetectError::OpenCv(e.message)
     }
+}
+
+/// Finds the target in a BGR frame; `Ok(None)` when it is not there.
+pub trait Detector: Send {
+    fn detect(&mut self, frame: &cv::Mat) -> Result<Option<Detection>, DetectError>;
+}
+
+pub(crate) fn check_bgr(frame: &cv::Mat) -> Result<(), DetectError> {
+    use opencv::prelude::*;
+    if frame.channels() != 3 || frame.depth() != cv::CV_8U {
+        return Err(DetectError::BadFrame {
+            channels: frame.channels(),
+            depth: frame.depth(),
+        });
+    }
+    Ok(())
 }

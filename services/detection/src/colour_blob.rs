@@ -1,0 +1,204 @@
+//! The classical detector: the largest blob of the target's colour. The default
+//! configuration finds a saturated red vehicle (the simulator's, and a red car on real
+//! footage); every threshold lives in [`ColourBlobConfig`].
+//!
+//! The target point is the blob's centroid. The default brightness floor keeps only the
+//! sunlit roof, whose centre is the recording format's target point (the centre of the
+//! vehicle's top face); the darker sides would pull the centroid sideways.
+
+use super::{check_bgr, DetectError, Detection, Detector};
+use opencv::core as cv;
+use opencv::prelude::*;
+use serde::{Deserialize, Serialize};
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct ColourBlobConfig {
+    /// Hue intervals in OpenCV's 0–180 scale (red wraps: two intervals).
+    pub hue_ranges: Vec<[u8; 2]>,
+    pub saturation_min: u8,
+    pub value_min: u8,
+    /// Blobs outside this area (pixels) are ignored.
+    pub min_area_px: i32,
+    pub max_area_px: i32,
+}
+
+impl Default for ColourBlobConfig {
+    fn default() -> Self {
+        Self {
+            hue_ranges: vec![[0, 8], [172, 180]],
+            saturation_min: 150,
+            value_min: 170,
+            min_area_px: 12,
+            max_area_px: 20_000,
+        }
+    }
+}
+
+pub struct ColourBlobDetector {
+    config: ColourBlobConfig,
+    hsv: cv::Mat,
+    mask: cv::Mat,
+    part: cv::Mat,
+    labels: cv::Mat,
+    stats: cv::Mat,
+    centroids: cv::Mat,
+}
+
+impl ColourBlobDetector {
+    pub fn new(config: ColourBlobConfig) -> Result<Self, DetectError> {
+        if config.hue_ranges.is_empty()
+            || config
+                .hue_ranges
+                .iter()
+                .any(|[lo, hi]| lo > hi || *hi > 180)
+        {
+            return Err(DetectError::Config(
+                "hue_ranges need lo <= hi <= 180".into(),
+            ));
+        }
+        if config.min_area_px < 1 || config.max_area_px < config.min_area_px {
+            return Err(DetectError::Config(
+                "need 1 <= min_area_px <= max_area_px".into(),
+            ));
+        }
+        Ok(Self {
+            config,
+            hsv: cv::Mat::default(),
+            mask: cv::Mat::default(),
+            part: cv::Mat::default(),
+            labels: cv::Mat::default(),
+            stats: cv::Mat::default(),
+            centroids: cv::Mat::default(),
+        })
+    }
+}
+
+impl Detector for ColourBlobDetector {
+    fn detect(&mut self, frame: &cv::Mat) -> Result<Option<Detection>, DetectError> {
+        check_bgr(frame)?;
+        opencv::imgproc::cvt_color_def(frame, &mut self.hsv, opencv::imgproc::COLOR_BGR2HSV)?;
+        let c = &self.config;
+        for (i, [lo, hi]) in c.hue_ranges.iter().enumerate() {
+            let low = cv::Scalar::new(*lo as f64, c.saturation_min as f64, c.value_min as f64, 0.0);
+            let high = cv::Scalar::new(*hi as f64, 255.0, 255.0, 0.0);
+            if i == 0 {
+                cv::in_range(&self.hsv, &low, &high, &mut self.mask)?;
+            } else {
+                cv::in_range(&self.hsv, &low, &high, &mut self.part)?;
+                let so_far = self.mask.clone();
+                cv::bitwise_or_def(&so_far, &self.part, &mut self.mask)?;
+            }
+        }
+        let n = opencv::imgproc::connected_components_with_stats(
+            &self.mask,
+            &mut self.labels,
+            &mut self.stats,
+            &mut self.centroids,
+            8,
+            cv::CV_32S,
+        )?;
+        let mut best: Option<(i32, i32)> = None; // (label, area)
+        for label in 1..n {
+            let area = *self
+                .stats
+                .at_2d::<i32>(label, opencv::imgproc::CC_STAT_AREA)?;
+            if area < c.min_area_px || area > c.max_area_px {
+                continue;
+            }
+            if best.is_none_or(|(_, a)| area > a) {
+                best = Some((label, area));
+            }
+        }
+        let Some((label, area)) = best else {
+            return Ok(None);
+        };
+        let stat = |k| self.stats.at_2d::<i32>(label, k).map(|v| *v as f64);
+        let (left, top) = (
+            stat(opencv::imgproc::CC_STAT_LEFT)?,
+            stat(opencv::imgproc::CC_STAT_TOP)?,
+        );
+        let (w, h) = (
+            stat(opencv::imgproc::CC_STAT_WIDTH)?,
+            stat(opencv::imgproc::CC_STAT_HEIGHT)?,
+        );
+        let centre = [
+            *self.centroids.at_2d::<f64>(label, 0)?,
+            *self.centroids.at_2d::<f64>(label, 1)?,
+        ];
+        // Confidence: how well the blob fills its box (a car roof fills most of it),
+        // scaled so a rotated rectangle (fill ≥ 0.5) still scores high.
+        let fill = area as f64 / (w * h);
+        Ok(Some(Detection {
+            bbox: [left, top, w, h],
+            centre,
+            confidence: (fill * 1.5).min(1.0) as f32,
+        }))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn frame_with_rect(x: i32, y: i32, w: i32, h: i32, bgr: [f64; 3]) -> cv::Mat {
+        let mut m = cv::Mat::new_rows_cols_with_default(
+            120,
+            160,
+            cv::CV_8UC3,
+            cv::Scalar::new(90.0, 110.0, 95.0, 0.0),
+        )
+        .unwrap();
+        opencv::imgproc::rectangle_def(
+            &mut m,
+            cv::Rect::new(x, y, w, h),
+            cv::Scalar::new(bgr[0], bgr[1], bgr[2], 0.0),
+        )
+        .unwrap();
+        let mut filled = m.clone();
+        opencv::imgproc::rectangle(
+            &mut filled,
+            cv::Rect::new(x, y, w, h),
+            cv::Scalar::new(bgr[0], bgr[1], bgr[2], 0.0),
+            -1,
+            opencv::imgproc::LINE_8,
+            0,
+        )
+        .unwrap();
+        filled
+    }
+
+    #[test]
+    fn finds_a_red_roof_and_its_centre() {
+        let mut d = ColourBlobDetector::new(ColourBlobConfig::default()).unwrap();
+        let f = frame_with_rect(40, 30, 20, 9, [36.0, 28.0, 214.0]);
+        let det = d.detect(&f).unwrap().expect("found");
+        assert_eq!(det.bbox, [40.0, 30.0, 20.0, 9.0]);
+        assert!((det.centre[0] - 49.5).abs() < 1e-9 && (det.centre[1] - 34.0).abs() < 1e-9);
+        assert!(det.confidence > 0.99);
+    }
+
+    #[test]
+    fn ignores_other_colours_and_dark_sides() {
+        let mut d = ColourBlobDetector::new(ColourBlobConfig::default()).unwrap();
+        assert!(d
+            .detect(&frame_with_rect(40, 30, 20, 9, [200.0, 60.0, 40.0]))
+            .unwrap()
+            .is_none());
+        assert!(d
+            .detect(&frame_with_rect(40, 30, 20, 9, [24.0, 18.0, 140.0]))
+            .unwrap()
+            .is_none());
+        let gray =
+            cv::Mat::new_rows_cols_with_default(10, 10, cv::CV_8UC1, cv::Scalar::all(0.0)).unwrap();
+        assert!(matches!(
+            d.detect(&gray),
+            Err(DetectError::BadFrame { channels: 1, .. })
+        ));
+        assert!(ColourBlobDetector::new(ColourBlobConfig {
+            hue_ranges: vec![[9, 3]],
+            ..Default::default()
+        })
+        .is_err());
+    }
+}

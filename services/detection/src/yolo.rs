@@ -1,0 +1,1 @@
+//! YOLO over OpenCV DNN (pending).
