@@ -1,0 +1,299 @@
+//! The whole chain in one process: from the current stereo pair (frames, measured
+//! poses, detections) and each UAV's keyframe ring to an estimate. It runs
+//! corresponding-point matching (Section 2.3), the consistency filter (eq. 29–32) and
+//! the altitude/regression iteration (Sections 2.1–2.2). The geolocation service, the
+//! tests and the evaluation harness all call [`VisionChain::process`].
+
+use crate::config::MatchingConfig;
+use crate::epipolar::{
+    estimate_fundamental, match_points, transfer_point, MatchReject, PairGeometry,
+};
+use crate::features::{Features, OrbExtractor};
+use crate::ring::{Keyframe, KeyframeRing};
+use geolocation::{
+    geolocate, geolocate_filtered, Estimate, EstimatorConfig, EstimatorError, FilteredEstimate,
+    Observation,
+};
+use nalgebra::Vector2;
+use opencv::core as cv;
+use shared_types::conventions::{Intrinsics, Uav};
+use shared_types::messages::PoseSample;
+use std::sync::Arc;
+use std::time::Instant;
+
+/// One current frame as the chain needs it.
+#[derive(Debug, Clone, Copy)]
+pub struct FrameInput<'a> {
+    pub seq: u64,
+    pub t_s: f64,
+    /// Measured pose (GPS + AHRS).
+    pub pose: PoseSample,
+    /// BGR or grey pixels.
+    pub image: &'a cv::Mat,
+    /// The detector's target pixel, if it found the target.
+    pub detection: Option<[f64; 2]>,
+    pub intrinsics: Intrinsics,
+    pub width: u32,
+    pub height: u32,
+}
+
+/// A past image that got a corresponding point.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PastMatch {
+    pub uav: Uav,
+    pub seq: u64,
+    /// p_n: the current target position's pixel in that past image.
+    pub pixel: [f64; 2],
+    pub inliers: [usize; 2],
+    /// F_Ln and F_Rn (x_pastᵀ F x_current = 0), for diagnostics.
+    pub fundamental: [nalgebra::Matrix3<f64>; 2],
+}
+
+#[derive(Debug)]
+pub enum ChainOutcome {
+    /// A current frame had no detection.
+    NoDetection,
+    /// A ring does not yet hold N − 1 past images far enough apart.
+    NotEnoughHistory { past: [usize; 2] },
+    /// The past images matched; estimates with and without the consistency filter.
+    Located(Box<Located>),
+}
+
+#[derive(Debug)]
+pub struct Located {
+    /// The paper's method: consistency filter (eq. 29–32), then the iteration.
+    pub filtered: Result<FilteredEstimate, EstimatorError>,
+    /// The iteration on every matched image, no filter (Table 1's "before filtering").
+    pub unfiltered: Result<Estimate, EstimatorError>,
+    pub past: Vec<PastMatch>,
+}
+
+/// Wall time of each step on the calling thread, microseconds.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct ChainTiming {
+    /// ORB on the current left and right frames.
+    pub orb_us: f64,
+    /// Ratio-tested Hamming matching, current vs past (2 × (2N − 2) matchings).
+    pub matching_us: f64,
+    /// F_Ln and F_Rn estimation.
+    pub fundamental_us: f64,
+    /// Epipolar-line intersections.
+    pub transfer_us: f64,
+    /// Consistency filter and the altitude/regression iteration (filtered estimate only).
+    pub estimate_us: f64,
+}
+
+impl ChainTiming {
+    pub fn total_us(&self) -> f64 {
+        self.orb_us + self.matching_us + self.fundamental_us + self.transfer_us + self.estimate_us
+    }
+}
+
+#[derive(Debug)]
+pub struct ChainResult {
+    pub outcome: ChainOutcome,
+    /// Past images that gave no point, with the reason.
+    pub rejections: Vec<(Uav, u64, MatchReject)>,
+    pub timing: ChainTiming,
+}
+
+#[derive(Debug, thiserror::Error)]
+pub enum ChainError {
+    #[error("invalid configuration: {0}")]
+    Config(String),
+    #[error("OpenCV: {0}")]
+    OpenCv(String),
+}
+
+impl From<opencv::Error> for ChainError {
+    fn from(e: opencv::Error) -> Self {
+        ChainError::OpenCv(e.message)
+    }
+}
+
+pub struct VisionChain {
+    config: MatchingConfig,
+    estimator: EstimatorConfig,
+    orb: OrbExtractor,
+    matcher: cv::Ptr<opencv::features2d::DescriptorMatcher>,
+    rings: [KeyframeRing; 2],
+}
+
+fn micros(since: Instant) -> f64 {
+    since.elapsed().as_secs_f64() * 1e6
+}
+
+impl VisionChain {
+    pub fn new(config: MatchingConfig, estimator: EstimatorConfig) -> Result<Self, ChainError> {
+        config.validate().map_err(ChainError::Config)?;
+        estimator
+            .validate()
+            .map_err(|e| ChainError::Config(e.to_string()))?;
+        let ring = || KeyframeRing::new(config.ring_capacity, config.keyframe_spacing_m);
+        Ok(Self {
+            orb: OrbExtractor::new(
+                config.orb_features,
+                config.orb_levels,
+                config.subpixel_keypoints,
+            )?,
+            matcher: opencv::features2d::DescriptorMatcher::create("BruteForce-Hamming")?,
+            rings: [ring(), ring()],
+            config,
+            estimator,
+        })
+    }
+
+    pub fn rings(&self) -> &[KeyframeRing; 2] {
+        &self.rings
+    }
+
+    /// Locates the target of the current pair, then offers both frames to the rings.
+    pub fn process(
+        &mut self,
+        left: &FrameInput,
+        right: &FrameInput,
+    ) -> Result<ChainResult, ChainError> {
+        let mut timing = ChainTiming::default();
+        let t = Instant::now();
+        let features = [
+            Arc::new(self.orb.extract(left.image)?),
+            Arc::new(self.orb.extract(right.image)?),
+        ];
+        timing.orb_us = micros(t);
+
+        let mut rejections = Vec::new();
+        let outcome = match (left.detection, right.detection) {
+            (Some(pl), Some(pr)) => self.locate(
+                [left, right],
+                [pl, pr],
+                &features,
+                &mut timing,
+                &mut rejections,
+            )?,
+            _ => ChainOutcome::NoDetection,
+        };
+        for (uav, frame) in [(Uav::Left, left), (Uav::Right, right)] {
+            self.rings[uav.index()].offer(Keyframe {
+                seq: frame.seq,
+                t_s: frame.t_s,
+                pose: frame.pose,
+                intrinsics: frame.intrinsics,
+                width: frame.width,
+                height: frame.height,
+                features: features[uav.index()].clone(),
+            });
+        }
+        Ok(ChainResult {
+            outcome,
+            rejections,
+            timing,
+        })
+    }
+
+    fn locate(
+        &self,
+        current: [&FrameInput; 2],
+        detections: [[f64; 2]; 2],
+        features: &[Arc<Features>; 2],
+        timing: &mut ChainTiming,
+        rejections: &mut Vec<(Uav, u64, MatchReject)>,
+    ) -> Result<ChainOutcome, ChainError> {
+        let wanted = self.config.images_per_uav - 1;
+        let selected: [Vec<&Keyframe>; 2] = [Uav::Left, Uav::Right].map(|uav| {
+            let frame = current[uav.index()];
+            self.rings[uav.index()].select(&frame.pose, frame.seq, wanted)
+        });
+        if selected.iter().any(|s| s.len() < wanted) {
+            return Ok(ChainOutcome::NotEnoughHistory {
+                past: [selected[0].len(), selected[1].len()],
+            });
+        }
+
+        let observation =
+            |uav: Uav, pose: &PoseSample, pixel: [f64; 2], intrinsics: Intrinsics| Observation {
+                uav,
+                position: pose.position(),
+                attitude: pose.attitude(),
+                pixel: Vector2::new(pixel[0], pixel[1]),
+                intrinsics,
+            };
+        let current_obs = [Uav::Left, Uav::Right].map(|uav| {
+            let f = current[uav.index()];
+            observation(uav, &f.pose, detections[uav.index()], f.intrinsics)
+        });
+
+        let mut past = Vec::new();
+        let mut past_obs = Vec::new();
+        for uav in [Uav::Left, Uav::Right] {
+            for kf in &selected[uav.index()] {
+                // F_Ln from the current left image, F_Rn from the current right one.
+                let mut geometry: [Option<PairGeometry>; 2] = [None, None];
+                for side in 0..2 {
+                    let t = Instant::now();
+                    let (a, b) = match_points(
+                        &self.matcher,
+                        &features[side],
+                        &kf.features,
+                        self.config.ratio_test,
+                    )?;
+                    timing.matching_us += micros(t);
+                    let t = Instant::now();
+                    let result = estimate_fundamental(
+                        &a,
+                        &b,
+                        (&current[side].intrinsics, &kf.intrinsics),
+                        &self.config,
+                    );
+                    timing.fundamental_us += micros(t);
+                    match result {
+                        Ok(g) => geometry[side] = Some(g),
+                        Err(reason) => {
+                            rejections.push((uav, kf.seq, reason));
+                            break;
+                        }
+                    }
+                }
+                let [Some(gl), Some(gr)] = geometry else {
+                    continue;
+                };
+                let t = Instant::now();
+                let transferred = transfer_point(
+                    &gl.f,
+                    detections[0],
+                    &gr.f,
+                    detections[1],
+                    kf.width,
+                    kf.height,
+                    &self.config,
+                );
+                timing.transfer_us += micros(t);
+                match transferred {
+                    Ok(pixel) => {
+                        past.push(PastMatch {
+                            uav,
+                            seq: kf.seq,
+                            pixel,
+                            inliers: [gl.inliers, gr.inliers],
+                            fundamental: [gl.f, gr.f],
+                        });
+                        past_obs.push(observation(uav, &kf.pose, pixel, kf.intrinsics));
+                    }
+                    Err(reason) => rejections.push((uav, kf.seq, reason)),
+                }
+            }
+        }
+
+        let t = Instant::now();
+        let filtered =
+            geolocate_filtered(&current_obs[0], &current_obs[1], &past_obs, &self.estimator);
+        timing.estimate_us = micros(t);
+        let mut all = current_obs.to_vec();
+        all.extend_from_slice(&past_obs);
+        let unfiltered = geolocate(&all, &self.estimator);
+        Ok(ChainOutcome::Located(Box::new(Located {
+            filtered,
+            unfiltered,
+            past,
+        })))
+    }
+}

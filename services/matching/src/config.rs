@@ -1,0 +1,95 @@
+//! Matching configuration (Section 2.3).
+
+use serde::{Deserialize, Serialize};
+
+/// How F_Ln and F_Rn are estimated from ORB matches.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum FundamentalMethod {
+    /// The paper's eight-point algorithm inside RANSAC (OpenCV `FM_RANSAC`).
+    Ransac8Point,
+    /// OpenCV's USAC MAGSAC++: faster and finds more inliers here.
+    Magsac,
+    /// The essential matrix from the calibrated intrinsics (5-point, MAGSAC++), then
+    /// F = K_n⁻ᵀ E K⁻¹: the same F, estimated with 5 degrees of freedom instead of 7.
+    /// The default: it gave the steadiest lines on the simulator (docs/matching.md).
+    Essential,
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct MatchingConfig {
+    /// N: images per UAV in a geolocation (the current one and N − 1 past ones);
+    /// 2N in all. The paper's "8 images" is N = 4.
+    pub images_per_uav: usize,
+    /// T_re of the baseline constraint, metres between consecutive selected images.
+    pub keyframe_spacing_m: f64,
+    /// Keyframes kept per UAV.
+    pub ring_capacity: usize,
+    /// ORB features per frame.
+    pub orb_features: i32,
+    /// ORB pyramid levels (scale step 1.2). Few levels suit two UAVs at one altitude.
+    pub orb_levels: i32,
+    /// Refine keypoints to sub-pixel positions (`cornerSubPix`).
+    pub subpixel_keypoints: bool,
+    /// Lowe's ratio test on the two nearest Hamming neighbours.
+    pub ratio_test: f32,
+    pub fundamental: FundamentalMethod,
+    /// RANSAC inlier threshold (distance to the epipolar line), pixels.
+    pub ransac_threshold_px: f64,
+    pub ransac_confidence: f64,
+    pub ransac_max_iterations: i32,
+    /// Fewer inliers than this rejects the past image.
+    pub min_inliers: usize,
+    /// Epipolar lines of eq. (27) and (28) closer to parallel than this reject it.
+    pub min_line_angle_deg: f64,
+    /// A transferred point must lie at least this far inside the image.
+    pub border_px: f64,
+}
+
+impl Default for MatchingConfig {
+    fn default() -> Self {
+        Self {
+            images_per_uav: 4,
+            keyframe_spacing_m: 8.0,
+            ring_capacity: 16,
+            orb_features: 500,
+            orb_levels: 3,
+            subpixel_keypoints: true,
+            ratio_test: 0.8,
+            fundamental: FundamentalMethod::Essential,
+            ransac_threshold_px: 1.0,
+            ransac_confidence: 0.999,
+            ransac_max_iterations: 500,
+            min_inliers: 30,
+            min_line_angle_deg: 5.0,
+            border_px: 2.0,
+        }
+    }
+}
+
+impl MatchingConfig {
+    pub fn validate(&self) -> Result<(), String> {
+        if self.images_per_uav < 1 || self.ring_capacity < self.images_per_uav {
+            return Err("need images_per_uav >= 1 and ring_capacity >= images_per_uav".into());
+        }
+        let ok = self.keyframe_spacing_m.is_finite()
+            && self.keyframe_spacing_m >= 0.0
+            && self.orb_features >= 8
+            && (1..=16).contains(&self.orb_levels)
+            && self.ratio_test > 0.0
+            && self.ratio_test <= 1.0
+            && self.ransac_threshold_px > 0.0
+            && self.ransac_confidence > 0.0
+            && self.ransac_confidence < 1.0
+            && self.ransac_max_iterations > 0
+            && self.min_inliers >= 8
+            && self.min_line_angle_deg >= 0.0
+            && self.border_px >= 0.0;
+        if ok {
+            Ok(())
+        } else {
+            Err(format!("invalid matching configuration: {self:?}"))
+        }
+    }
+}
