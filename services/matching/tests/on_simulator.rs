@@ -40,7 +40,7 @@ fn epipolar_transfer_lands_on_the_current_target_in_past_images() {
     let mut k = 0u64;
     while let Some(step) = sim.step() {
         k += 1;
-        if k % 4 != 0 || k > 480 {
+        if !k.is_multiple_of(4) || k > 480 {
             continue;
         }
         {
