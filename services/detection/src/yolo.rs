@@ -129,9 +129,15 @@ pub fn decode(
         YoloLayout::Auto => YoloLayout::V8,
         l => l,
     };
-    let (count, width, value): (usize, usize, Box<dyn Fn(usize, usize) -> f32>) = match layout {
-        YoloLayout::V5 => (a, b, Box::new(|i, k| data[i * b + k])),
-        _ => (b, a, Box::new(|i, k| data[k * b + i])),
+    let row_major = layout == YoloLayout::V5;
+    let (count, width) = if row_major { (a, b) } else { (b, a) };
+    // Value k of candidate i.
+    let value = |i: usize, k: usize| {
+        if row_major {
+            data[i * b + k]
+        } else {
+            data[k * b + i]
+        }
     };
     let first_class = if layout == YoloLayout::V5 { 5 } else { 4 };
     if width <= first_class {
@@ -152,7 +158,8 @@ pub fn decode(
         } else {
             best
         };
-        if !(score >= threshold) || (!classes.is_empty() && !classes.contains(&class)) {
+        if score.is_nan() || score < threshold || (!classes.is_empty() && !classes.contains(&class))
+        {
             continue;
         }
         let c = Candidate {
