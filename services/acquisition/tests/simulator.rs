@@ -4,7 +4,7 @@
 use acquisition::recording::Recording;
 use acquisition::sim::render::{CameraView, Renderer, Surface, VEHICLE_TOP_BGR};
 use acquisition::sim::{record, Presets, SimConfig, Simulator};
-use nalgebra::{Matrix3, Vector3};
+use nalgebra::Vector3;
 use opencv::core as cv;
 use opencv::prelude::*;
 use shared_types::conventions::Uav;
@@ -124,15 +124,6 @@ fn rendered_target_centre_matches_truth_within_half_a_pixel() {
     );
 }
 
-/// F such that x2ᵀ F x1 = 0 for pixels of the same world point in views 1 and 2.
-fn fundamental(a: &CameraView, b: &CameraView) -> Matrix3<f64> {
-    let r = b.rotation.transpose() * a.rotation;
-    let t = b.rotation.transpose() * (a.position - b.position);
-    let e = t.cross_matrix() * r;
-    let (ka, kb) = (a.intrinsics.matrix(), b.intrinsics.matrix());
-    kb.try_inverse().unwrap().transpose() * e * ka.try_inverse().unwrap()
-}
-
 fn gray(bgr: &[u8], config: &SimConfig) -> cv::Mat {
     let (w, h) = (config.camera.width as i32, config.camera.height as i32);
     let m = cv::Mat::new_rows_cols_with_data(h, 3 * w, bgr).unwrap();
@@ -179,7 +170,7 @@ fn median_epipolar_error(
         .filter(|m| m.len() == 2 && m.get(0).unwrap().distance < 0.75 * m.get(1).unwrap().distance)
         .map(|m| m.get(0).unwrap())
         .collect();
-    let f = fundamental(va, vb);
+    let f = va.fundamental_to(vb).unwrap();
     let mut errors: Vec<f64> = matches
         .iter()
         .map(|m| {

@@ -10,18 +10,6 @@ use opencv::core as cv;
 use opencv::prelude::*;
 use std::collections::HashMap;
 
-fn fundamental(
-    a: &acquisition::sim::render::CameraView,
-    b: &acquisition::sim::render::CameraView,
-) -> nalgebra::Matrix3<f64> {
-    let r = b.rotation.transpose() * a.rotation;
-    let t = b.rotation.transpose() * (a.position - b.position);
-    let e = t.cross_matrix() * r;
-    b.intrinsics.matrix().try_inverse().unwrap().transpose()
-        * e
-        * a.intrinsics.matrix().try_inverse().unwrap()
-}
-
 #[test]
 fn epipolar_transfer_lands_on_the_current_target_in_past_images() {
     let config = Presets::builtin().get("table1").unwrap();
@@ -78,8 +66,8 @@ fn epipolar_transfer_lands_on_the_current_target_in_past_images() {
                 // The transfer through the *true* F's isolates the method from F estimation.
                 let det = [inputs[0].detection.unwrap(), inputs[1].detection.unwrap()];
                 let (fl, fr) = (
-                    fundamental(&step.frames[0].view, &then.view),
-                    fundamental(&step.frames[1].view, &then.view),
+                    step.frames[0].view.fundamental_to(&then.view).unwrap(),
+                    step.frames[1].view.fundamental_to(&then.view).unwrap(),
                 );
                 let loose = MatchingConfig {
                     min_line_angle_deg: 0.0,

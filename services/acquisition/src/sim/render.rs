@@ -34,6 +34,20 @@ impl CameraView {
         self.intrinsics.project(c).map(|v| [v.x, v.y])
     }
 
+    /// The fundamental matrix F with `x_otherᵀ F x_self = 0` for pixels of one world
+    /// point in this view and `other`: `K_o⁻ᵀ [t]× R K_s⁻¹` with `R = R_oᵀ R_s` and
+    /// `t = R_oᵀ (C_s − C_o)`. Ground truth for testing matching.
+    pub fn fundamental_to(&self, other: &CameraView) -> Option<Matrix3<f64>> {
+        let r = other.rotation.transpose() * self.rotation;
+        let t = other.rotation.transpose() * (self.position - other.position);
+        let e = t.cross_matrix() * r;
+        Some(
+            other.intrinsics.matrix().try_inverse()?.transpose()
+                * e
+                * self.intrinsics.matrix().try_inverse()?,
+        )
+    }
+
     /// Per-view ray basis: the (unnormalised) ray of pixel (u, v) is `a + u·b + v·c`.
     fn ray_basis(&self) -> [Vector3<f64>; 3] {
         let k = &self.intrinsics;
