@@ -4,7 +4,7 @@
 //!
 //! Type names are pinned with `#[type_name]` so separately built processes agree.
 
-use crate::conventions::{Attitude, Uav};
+use crate::conventions::Attitude;
 use iceoryx2::prelude::ZeroCopySend;
 use nalgebra::Point3;
 
@@ -27,15 +27,6 @@ impl PixelFormat {
             3 => Some(PixelFormat::Bgr8),
             _ => None,
         }
-    }
-}
-
-/// UAV code in messages: 0 = left, 1 = right (see [`Uav::index`]).
-pub fn uav_from_code(code: u8) -> Option<Uav> {
-    match code {
-        0 => Some(Uav::Left),
-        1 => Some(Uav::Right),
-        _ => None,
     }
 }
 

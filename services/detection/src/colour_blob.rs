@@ -40,6 +40,7 @@ pub struct ColourBlobDetector {
     hsv: cv::Mat,
     mask: cv::Mat,
     part: cv::Mat,
+    combined: cv::Mat,
     labels: cv::Mat,
     stats: cv::Mat,
     centroids: cv::Mat,
@@ -67,6 +68,7 @@ impl ColourBlobDetector {
             hsv: cv::Mat::default(),
             mask: cv::Mat::default(),
             part: cv::Mat::default(),
+            combined: cv::Mat::default(),
             labels: cv::Mat::default(),
             stats: cv::Mat::default(),
             centroids: cv::Mat::default(),
@@ -86,8 +88,8 @@ impl Detector for ColourBlobDetector {
                 cv::in_range(&self.hsv, &low, &high, &mut self.mask)?;
             } else {
                 cv::in_range(&self.hsv, &low, &high, &mut self.part)?;
-                let so_far = self.mask.clone();
-                cv::bitwise_or_def(&so_far, &self.part, &mut self.mask)?;
+                cv::bitwise_or_def(&self.mask, &self.part, &mut self.combined)?;
+                std::mem::swap(&mut self.mask, &mut self.combined);
             }
         }
         let n = opencv::imgproc::connected_components_with_stats(
@@ -149,15 +151,8 @@ mod tests {
             cv::Scalar::new(90.0, 110.0, 95.0, 0.0),
         )
         .unwrap();
-        opencv::imgproc::rectangle_def(
-            &mut m,
-            cv::Rect::new(x, y, w, h),
-            cv::Scalar::new(bgr[0], bgr[1], bgr[2], 0.0),
-        )
-        .unwrap();
-        let mut filled = m.clone();
         opencv::imgproc::rectangle(
-            &mut filled,
+            &mut m,
             cv::Rect::new(x, y, w, h),
             cv::Scalar::new(bgr[0], bgr[1], bgr[2], 0.0),
             -1,
@@ -165,7 +160,7 @@ mod tests {
             0,
         )
         .unwrap();
-        filled
+        m
     }
 
     #[test]

@@ -30,4 +30,6 @@ pub enum SimError {
     },
     #[error(transparent)]
     Recording(#[from] RecordingError),
+    #[error("OpenCV: {0}")]
+    OpenCv(String),
 }

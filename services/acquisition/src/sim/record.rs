@@ -39,7 +39,7 @@ pub fn record(
     let mut writer = RecordingWriter::create(out, &meta, true)?;
     let (w, h) = (config.camera.width as i32, config.camera.height as i32);
     let blank = || cv::Mat::new_rows_cols_with_default(h, w, cv::CV_8UC3, cv::Scalar::all(0.0));
-    let cv_err = |e: opencv::Error| SimError::Config(format!("OpenCV: {}", e.message));
+    let cv_err = |e: opencv::Error| SimError::OpenCv(e.message);
     let (mut left, mut right) = (blank().map_err(cv_err)?, blank().map_err(cv_err)?);
     let stride = 3 * w as usize;
     let total = sim.frame_count();
