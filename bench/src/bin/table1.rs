@@ -32,6 +32,15 @@ struct Args {
     /// RANSAC/MAGSAC iteration cap (default: MatchingConfig's).
     #[arg(long)]
     max_iterations: Option<i32>,
+    /// USAC score: magsac | msac.
+    #[arg(long)]
+    score: Option<String>,
+    /// USAC local optimisation: none | inner | inner_and_iterative | graph_cut | sigma.
+    #[arg(long)]
+    lo: Option<String>,
+    /// USAC local-optimisation rounds.
+    #[arg(long)]
+    lo_iterations: Option<i32>,
 }
 
 fn main() -> Result<()> {
@@ -53,6 +62,15 @@ fn main() -> Result<()> {
     }
     if let Some(n) = args.max_iterations {
         matching.ransac_max_iterations = n;
+    }
+    if let Some(s) = &args.score {
+        matching.usac_score = toml::Value::String(s.clone()).try_into()?;
+    }
+    if let Some(s) = &args.lo {
+        matching.usac_local_optimisation = toml::Value::String(s.clone()).try_into()?;
+    }
+    if let Some(n) = args.lo_iterations {
+        matching.usac_lo_iterations = n;
     }
     let mut chain = VisionChain::new(matching, EstimatorConfig::default())?;
     let mut images = [

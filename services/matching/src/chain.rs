@@ -115,7 +115,6 @@ pub struct VisionChain {
     config: MatchingConfig,
     estimator: EstimatorConfig,
     orb: OrbExtractor,
-    matcher: cv::Ptr<opencv::features2d::DescriptorMatcher>,
     rings: [KeyframeRing; 2],
 }
 
@@ -136,7 +135,6 @@ impl VisionChain {
                 config.orb_levels,
                 config.subpixel_keypoints,
             )?,
-            matcher: opencv::features2d::DescriptorMatcher::create("BruteForce-Hamming")?,
             rings: [ring(), ring()],
             config,
             estimator,
@@ -224,6 +222,7 @@ impl VisionChain {
 
         let mut past = Vec::new();
         let mut past_obs = Vec::new();
+        let mut neighbours = Vec::with_capacity(self.config.orb_features as usize);
         for uav in [Uav::Left, Uav::Right] {
             for kf in &selected[uav.index()] {
                 // F_Ln from the current left image, F_Rn from the current right one.
@@ -231,11 +230,11 @@ impl VisionChain {
                 for side in 0..2 {
                     let t = Instant::now();
                     let (a, b) = match_points(
-                        &self.matcher,
                         &features[side],
                         &kf.features,
                         self.config.ratio_test,
-                    )?;
+                        &mut neighbours,
+                    );
                     timing.matching_us += micros(t);
                     let t = Instant::now();
                     let result = estimate_fundamental(

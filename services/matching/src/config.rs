@@ -16,6 +16,31 @@ pub enum FundamentalMethod {
     Essential,
 }
 
+/// USAC's scoring of a hypothesis (OpenCV `ScoreMethod`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum UsacScore {
+    /// MAGSAC++: marginalises over the noise scale.
+    Magsac,
+    /// MSAC: truncated squared residuals; cheaper.
+    Msac,
+}
+
+/// USAC's local optimisation of the best hypothesis so far (OpenCV `LocalOptimMethod`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum UsacLocalOptimisation {
+    None,
+    /// Inner RANSAC on the inliers.
+    Inner,
+    /// Inner RANSAC plus iterated least squares.
+    InnerAndIterative,
+    /// Graph-cut RANSAC.
+    GraphCut,
+    /// MAGSAC++'s σ-consensus (OpenCV's default with `USAC_MAGSAC`).
+    Sigma,
+}
+
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct MatchingConfig {
@@ -38,7 +63,14 @@ pub struct MatchingConfig {
     /// RANSAC inlier threshold (distance to the epipolar line), pixels.
     pub ransac_threshold_px: f64,
     pub ransac_confidence: f64,
+    /// Hypotheses tried at most (USAC honours it through `UsacParams`).
     pub ransac_max_iterations: i32,
+    /// USAC scoring for `magsac` and `essential`.
+    pub usac_score: UsacScore,
+    /// USAC local optimisation for `magsac` and `essential`.
+    pub usac_local_optimisation: UsacLocalOptimisation,
+    /// Local-optimisation rounds.
+    pub usac_lo_iterations: i32,
     /// Fewer inliers than this rejects the past image.
     pub min_inliers: usize,
     /// Epipolar lines of eq. (27) and (28) closer to parallel than this reject it.
@@ -60,7 +92,13 @@ impl Default for MatchingConfig {
             fundamental: FundamentalMethod::Essential,
             ransac_threshold_px: 1.0,
             ransac_confidence: 0.999,
-            ransac_max_iterations: 500,
+            // 50 hypotheses, MSAC + graph-cut: 22 ms for the 12 E of a geolocation
+            // against 181 ms with MAGSAC++'s defaults, at the same Table 1 accuracy
+            // (docs/matching.md, "Speed").
+            ransac_max_iterations: 50,
+            usac_score: UsacScore::Msac,
+            usac_local_optimisation: UsacLocalOptimisation::GraphCut,
+            usac_lo_iterations: 10,
             min_inliers: 30,
             min_line_angle_deg: 5.0,
             border_px: 2.0,
@@ -83,6 +121,7 @@ impl MatchingConfig {
             && self.ransac_confidence > 0.0
             && self.ransac_confidence < 1.0
             && self.ransac_max_iterations > 0
+            && self.usac_lo_iterations >= 0
             && self.min_inliers >= 8
             && self.min_line_angle_deg >= 0.0
             && self.border_px >= 0.0;

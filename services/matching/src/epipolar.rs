@@ -8,8 +8,9 @@
 //! from F directly, which skips a decomposition and its four-fold ambiguity. Likewise
 //! `l₂ = F_Rn (u_R, v_R, 1)ᵀ` (eq. 28), and p_n = l₁ × l₂.
 
-use crate::config::{FundamentalMethod, MatchingConfig};
+use crate::config::{FundamentalMethod, MatchingConfig, UsacLocalOptimisation, UsacScore};
 use crate::features::Features;
+use crate::hamming::{knn2, Nearest2};
 use nalgebra::{Matrix3, Vector3};
 use opencv::core as cv;
 use opencv::prelude::*;
@@ -45,30 +46,24 @@ pub struct PairGeometry {
     pub inliers: usize,
 }
 
-/// Ratio-tested Hamming matches from `current` to `past`, as point pairs.
+/// Ratio-tested Hamming matches from `current` to `past`, as point pairs. `scratch`
+/// holds the neighbour lists between calls.
 pub fn match_points(
-    matcher: &cv::Ptr<opencv::features2d::DescriptorMatcher>,
     current: &Features,
     past: &Features,
     ratio: f32,
-) -> opencv::Result<(cv::Vector<cv::Point2f>, cv::Vector<cv::Point2f>)> {
+    scratch: &mut Vec<Option<Nearest2>>,
+) -> (cv::Vector<cv::Point2f>, cv::Vector<cv::Point2f>) {
     let (mut a, mut b) = (cv::Vector::new(), cv::Vector::new());
-    if current.descriptors.rows() < 2 || past.descriptors.rows() < 2 {
-        return Ok((a, b));
-    }
-    let mut knn = cv::Vector::<cv::Vector<cv::DMatch>>::new();
-    matcher.knn_train_match_def(&current.descriptors, &past.descriptors, &mut knn, 2)?;
-    for pair in knn.iter() {
-        if pair.len() < 2 {
-            continue;
-        }
-        let (best, second) = (pair.get(0)?, pair.get(1)?);
-        if best.distance < ratio * second.distance {
-            a.push(current.points[best.query_idx as usize]);
-            b.push(past.points[best.train_idx as usize]);
+    knn2(&current.descriptors, &past.descriptors, scratch);
+    for (i, n) in scratch.iter().enumerate() {
+        let Some(n) = n else { continue };
+        if (n.best as f32) < ratio * n.second as f32 {
+            a.push(current.points[i]);
+            b.push(past.points[n.best_index]);
         }
     }
-    Ok((a, b))
+    (a, b)
 }
 
 /// Estimates F from matched points by the configured robust method.
@@ -85,22 +80,20 @@ pub fn estimate_fundamental(
     let mut mask = cv::Mat::default();
     let fail = |_| MatchReject::FundamentalFailed;
     let f = match config.fundamental {
-        FundamentalMethod::Ransac8Point | FundamentalMethod::Magsac => {
-            let method = if config.fundamental == FundamentalMethod::Magsac {
-                opencv::calib3d::USAC_MAGSAC
-            } else {
-                opencv::calib3d::FM_RANSAC
-            };
-            opencv::calib3d::find_fundamental_mat(
-                current,
-                past,
-                method,
-                config.ransac_threshold_px,
-                config.ransac_confidence,
-                config.ransac_max_iterations,
-                &mut mask,
-            )
-            .map_err(fail)?
+        FundamentalMethod::Ransac8Point => opencv::calib3d::find_fundamental_mat(
+            current,
+            past,
+            opencv::calib3d::FM_RANSAC,
+            config.ransac_threshold_px,
+            config.ransac_confidence,
+            config.ransac_max_iterations,
+            &mut mask,
+        )
+        .map_err(fail)?,
+        FundamentalMethod::Magsac => {
+            let params = usac_params(config, config.ransac_threshold_px).map_err(fail)?;
+            opencv::calib3d::find_fundamental_mat_2(current, past, &mut mask, params)
+                .map_err(fail)?
         }
         FundamentalMethod::Essential => {
             essential_as_fundamental(current, past, intrinsics, config, &mut mask)?
@@ -153,15 +146,17 @@ fn essential_as_fundamental(
         .map_err(fail)?;
     // Threshold in normalised units: the pixel threshold over the mean focal length.
     let threshold = config.ransac_threshold_px / (0.5 * (k_past.fx + k_past.fy));
-    let e = opencv::calib3d::find_essential_mat(
+    let params = usac_params(config, threshold).map_err(fail)?;
+    let no_distortion = cv::Mat::default();
+    let e = opencv::calib3d::find_essential_mat_4(
         &a,
         &b,
         &identity,
-        opencv::calib3d::USAC_MAGSAC,
-        config.ransac_confidence,
-        threshold,
-        config.ransac_max_iterations,
+        &identity,
+        &no_distortion,
+        &no_distortion,
         mask,
+        params,
     )
     .map_err(fail)?;
     if e.rows() != 3 || e.cols() != 3 {
@@ -184,6 +179,35 @@ fn essential_as_fundamental(
         .map_err(fail)?
         .try_clone()
         .map_err(fail)
+}
+
+/// OpenCV's USAC settings from the config. The explicit `UsacParams` overloads are
+/// used because the `method` overloads ignore `maxIters` on the USAC path (measured,
+/// docs/matching.md). The generator is seeded, so a run is repeatable.
+fn usac_params(
+    config: &MatchingConfig,
+    threshold: f64,
+) -> opencv::Result<opencv::calib3d::UsacParams> {
+    use opencv::calib3d::{LocalOptimMethod, ScoreMethod};
+    let mut p = opencv::calib3d::UsacParams::default()?;
+    p.confidence = config.ransac_confidence;
+    p.threshold = threshold;
+    p.max_iterations = config.ransac_max_iterations;
+    p.lo_iterations = config.usac_lo_iterations;
+    p.is_parallel = false;
+    p.random_generator_state = 0;
+    p.score = match config.usac_score {
+        UsacScore::Magsac => ScoreMethod::SCORE_METHOD_MAGSAC,
+        UsacScore::Msac => ScoreMethod::SCORE_METHOD_MSAC,
+    };
+    p.lo_method = match config.usac_local_optimisation {
+        UsacLocalOptimisation::None => LocalOptimMethod::LOCAL_OPTIM_NULL,
+        UsacLocalOptimisation::Inner => LocalOptimMethod::LOCAL_OPTIM_INNER_LO,
+        UsacLocalOptimisation::InnerAndIterative => LocalOptimMethod::LOCAL_OPTIM_INNER_AND_ITER_LO,
+        UsacLocalOptimisation::GraphCut => LocalOptimMethod::LOCAL_OPTIM_GC,
+        UsacLocalOptimisation::Sigma => LocalOptimMethod::LOCAL_OPTIM_SIGMA,
+    };
+    Ok(p)
 }
 
 /// Eq. (27)–(28): the intersection in the past image of the epipolar lines of the

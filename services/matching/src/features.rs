@@ -4,11 +4,14 @@
 use opencv::core as cv;
 use opencv::prelude::*;
 
-/// Keypoint positions and their ORB descriptors (one row each).
-#[derive(Debug, Clone)]
+use crate::hamming::{pack, Descriptor};
+
+/// Keypoint positions and their ORB descriptors (same order), packed for
+/// [`crate::hamming::knn2`].
+#[derive(Debug, Clone, Default)]
 pub struct Features {
     pub points: Vec<cv::Point2f>,
-    pub descriptors: cv::Mat,
+    pub descriptors: Vec<Descriptor>,
 }
 
 pub struct OrbExtractor {
@@ -62,9 +65,16 @@ impl OrbExtractor {
                 criteria,
             )?;
         }
+        let mut packed = Vec::with_capacity(points.len());
+        for r in 0..descriptors.rows() {
+            let row = descriptors.at_row::<u8>(r)?;
+            packed.push(pack(row).ok_or_else(|| {
+                opencv::Error::new(cv::StsBadSize, "ORB descriptor is not 32 bytes")
+            })?);
+        }
         Ok(Features {
             points: points.to_vec(),
-            descriptors,
+            descriptors: packed,
         })
     }
 }

@@ -11,9 +11,10 @@ pub mod chain;
 pub mod config;
 pub mod epipolar;
 pub mod features;
+pub mod hamming;
 pub mod ring;
 
 pub use chain::{
     ChainOutcome, ChainResult, ChainTiming, FrameInput, Located, PastMatch, VisionChain,
 };
-pub use config::{FundamentalMethod, MatchingConfig};
+pub use config::{FundamentalMethod, MatchingConfig, UsacLocalOptimisation, UsacScore};

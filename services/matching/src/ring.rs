@@ -102,10 +102,7 @@ mod tests {
             intrinsics: Intrinsics::new(500.0, 500.0, 320.0, 240.0),
             width: 640,
             height: 480,
-            features: Arc::new(Features {
-                points: Vec::new(),
-                descriptors: opencv::core::Mat::default(),
-            }),
+            features: Arc::new(Features::default()),
         }
     }
 

@@ -1,0 +1,137 @@
+//! Brute-force nearest neighbours of ORB descriptors by Hamming distance.
+//!
+//! Written by hand because OpenCV's `BFMatcher::knnMatch` spent ~2.6 ms per 500 × 500
+//! pair here, mostly building nested `Vector<Vector<DMatch>>` through the bindings
+//! (docs/matching.md). A descriptor is 256 bits held as four `u64`; the distance is
+//! four XOR + popcounts. On x86-64 the loop is compiled a second time with the `popcnt`
+//! instruction and picked at run time.
+
+/// One 256-bit ORB descriptor.
+pub type Descriptor = [u64; 4];
+
+/// The best and second-best train neighbours of one query descriptor.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Nearest2 {
+    pub best_index: usize,
+    pub best: u32,
+    pub second: u32,
+}
+
+/// Packs OpenCV's 32-byte descriptor rows.
+pub fn pack(row: &[u8]) -> Option<Descriptor> {
+    if row.len() != 32 {
+        return None;
+    }
+    let mut d = [0u64; 4];
+    for (i, chunk) in row.chunks_exact(8).enumerate() {
+        let mut bytes = [0u8; 8];
+        bytes.copy_from_slice(chunk);
+        d[i] = u64::from_le_bytes(bytes);
+    }
+    Some(d)
+}
+
+#[inline(always)]
+fn distance(a: &Descriptor, b: &Descriptor) -> u32 {
+    (a[0] ^ b[0]).count_ones()
+        + (a[1] ^ b[1]).count_ones()
+        + (a[2] ^ b[2]).count_ones()
+        + (a[3] ^ b[3]).count_ones()
+}
+
+#[inline(always)]
+fn knn2_generic(query: &[Descriptor], train: &[Descriptor], out: &mut Vec<Option<Nearest2>>) {
+    out.clear();
+    out.extend(query.iter().map(|q| {
+        if train.len() < 2 {
+            return None;
+        }
+        let (mut best, mut second, mut best_index) = (u32::MAX, u32::MAX, 0);
+        for (j, t) in train.iter().enumerate() {
+            let d = distance(q, t);
+            if d < best {
+                second = best;
+                best = d;
+                best_index = j;
+            } else if d < second {
+                second = d;
+            }
+        }
+        Some(Nearest2 {
+            best_index,
+            best,
+            second,
+        })
+    }));
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "popcnt")]
+fn knn2_popcnt(query: &[Descriptor], train: &[Descriptor], out: &mut Vec<Option<Nearest2>>) {
+    knn2_generic(query, train, out)
+}
+
+/// For each query descriptor, its two nearest train descriptors (`None` when the train
+/// set has fewer than two). Results go into `out` (cleared first) to reuse its buffer.
+pub fn knn2(query: &[Descriptor], train: &[Descriptor], out: &mut Vec<Option<Nearest2>>) {
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("popcnt") {
+        // SAFETY: the CPU supports popcnt (checked just above).
+        return unsafe { knn2_popcnt(query, train, out) };
+    }
+    knn2_generic(query, train, out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::{Rng, SeedableRng};
+
+    fn brute(query: &Descriptor, train: &[Descriptor]) -> (usize, u32, u32) {
+        let mut d: Vec<(u32, usize)> = train
+            .iter()
+            .enumerate()
+            .map(|(j, t)| (distance(query, t), j))
+            .collect();
+        d.sort();
+        (d[0].1, d[0].0, d[1].0)
+    }
+
+    #[test]
+    fn finds_the_two_nearest_like_a_sort() {
+        let mut rng = rand::rngs::StdRng::seed_from_u64(7);
+        let mut random = || [rng.random(), rng.random(), rng.random(), rng.random()];
+        let train: Vec<Descriptor> = (0..300).map(|_| random()).collect();
+        let query: Vec<Descriptor> = (0..50).map(|_| random()).collect();
+        let mut out = Vec::new();
+        knn2(&query, &train, &mut out);
+        for (q, n) in query.iter().zip(&out) {
+            let n = n.unwrap();
+            let (_, best, second) = brute(q, &train);
+            assert_eq!((n.best, n.second), (best, second));
+            assert_eq!(distance(q, &train[n.best_index]), best);
+        }
+    }
+
+    #[test]
+    fn exact_copy_is_distance_zero_and_small_train_gives_none() {
+        let a = [1, 2, 3, 4];
+        let b = [u64::MAX, 0, 0, 0];
+        let mut out = Vec::new();
+        knn2(&[a], &[b, a], &mut out);
+        assert_eq!(out[0].unwrap().best_index, 1);
+        assert_eq!(out[0].unwrap().best, 0);
+        assert_eq!(out[0].unwrap().second, distance(&a, &b));
+        knn2(&[a], &[b], &mut out);
+        assert_eq!(out, vec![None]);
+    }
+
+    #[test]
+    fn pack_reads_little_endian_rows() {
+        let mut row = [0u8; 32];
+        row[0] = 1;
+        row[31] = 0x80;
+        assert_eq!(pack(&row), Some([1, 0, 0, 1 << 63]));
+        assert_eq!(pack(&row[..31]), None);
+    }
+}
