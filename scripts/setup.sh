@@ -8,6 +8,7 @@ packages=(
   clang           # the opencv crate's binding generator uses libclang
   libclang-dev
   pkg-config      # the opencv crate finds OpenCV through pkg-config
+  fonts-dejavu-core  # text in the PNG plots (read at run time)
 )
 
 missing=()

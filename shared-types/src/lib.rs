@@ -3,7 +3,11 @@
 //! What every dualgeo process agrees on: the frame conventions (one function builds
 //! C_w^c), the shared-memory message layouts and the service names.
 
+pub mod clock;
 pub mod conventions;
 pub mod messages;
 pub mod nav_noise;
 pub mod service_names;
+pub mod shell;
+pub mod stats;
+pub mod transport;

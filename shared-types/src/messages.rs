@@ -69,12 +69,14 @@ impl PoseSample {
 /// User header of a frame sample; the payload is `stride × height` bytes of pixels.
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
 #[repr(C)]
-#[type_name("dualgeo::FrameHeader/v1")]
+#[type_name("dualgeo::FrameHeader/v2")]
 pub struct FrameHeader {
-    /// Per-UAV frame index.
+    /// Per-UAV frame index (the pair index: left and right frames of one instant share it).
     pub seq: u64,
     /// CLOCK_MONOTONIC nanoseconds when the frame entered dualgeo.
     pub capture_ns: u64,
+    /// CLOCK_MONOTONIC nanoseconds just before the sample was sent (transport hop start).
+    pub published_ns: u64,
     /// Capture time on the recording's clock, seconds.
     pub t_s: f64,
     /// 0 = left, 1 = right.
@@ -89,6 +91,8 @@ pub struct FrameHeader {
     pub _reserved2: u32,
     /// Measured pose at capture.
     pub pose: PoseSample,
+    /// Pinhole intrinsics of this camera: fx, fy, cx, cy (pixels).
+    pub intrinsics: [f64; 4],
 }
 
 impl FrameHeader {
@@ -101,6 +105,122 @@ impl FrameHeader {
         }
         (self.stride as usize).checked_mul(self.height as usize)
     }
+}
+
+/// The detector's answer for one frame.
+#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
+#[repr(C)]
+#[type_name("dualgeo::DetectionMsg/v1")]
+pub struct DetectionMsg {
+    pub seq: u64,
+    pub capture_ns: u64,
+    pub published_ns: u64,
+    pub t_s: f64,
+    /// 0 = left, 1 = right.
+    pub uav: u8,
+    /// 1 when the target was found; the fields below are meaningful only then.
+    pub found: u8,
+    pub _reserved: [u8; 6],
+    /// x, y, width, height, pixels.
+    pub bbox: [f64; 4],
+    /// Target pixel (u, v).
+    pub centre: [f64; 2],
+    pub confidence: f64,
+}
+
+/// One image of an observation set: the measured pose and the target's pixel.
+#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
+#[repr(C)]
+#[type_name("dualgeo::ObservationEntry/v1")]
+pub struct ObservationEntry {
+    /// 0 = left, 1 = right.
+    pub uav: u8,
+    pub _reserved: [u8; 7],
+    pub pose: PoseSample,
+    /// (u, v), pixels: the detection (current images) or the epipolar transfer (past).
+    pub pixel: [f64; 2],
+    /// fx, fy, cx, cy.
+    pub intrinsics: [f64; 4],
+}
+
+/// Most images an observation set carries (N ≤ 16 per UAV).
+pub const MAX_OBSERVATIONS: usize = 32;
+
+/// Matching's output for one stereo pair: `entries[0]` is the current left image,
+/// `entries[1]` the current right one, then `count − 2` past images.
+#[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
+#[repr(C)]
+#[type_name("dualgeo::ObservationSetMsg/v2")]
+pub struct ObservationSetMsg {
+    /// Index of this set among the sets matching published (gaps = sets lost).
+    pub set_seq: u64,
+    pub pair_seq: u64,
+    pub capture_ns: u64,
+    pub published_ns: u64,
+    pub t_s: f64,
+    pub count: u32,
+    /// Past images that gave no corresponding point.
+    pub rejected_past: u32,
+    pub entries: [ObservationEntry; MAX_OBSERVATIONS],
+}
+
+impl Default for ObservationSetMsg {
+    fn default() -> Self {
+        Self {
+            set_seq: 0,
+            pair_seq: 0,
+            capture_ns: 0,
+            published_ns: 0,
+            t_s: 0.0,
+            count: 0,
+            rejected_past: 0,
+            entries: [ObservationEntry::default(); MAX_OBSERVATIONS],
+        }
+    }
+}
+
+impl ObservationSetMsg {
+    /// The filled entries (`count` clamped to the array).
+    pub fn entries(&self) -> &[ObservationEntry] {
+        &self.entries[..(self.count as usize).min(MAX_OBSERVATIONS)]
+    }
+}
+
+/// Geolocation's output for one stereo pair.
+#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
+#[repr(C)]
+#[type_name("dualgeo::EstimateMsg/v1")]
+pub struct EstimateMsg {
+    pub pair_seq: u64,
+    pub capture_ns: u64,
+    pub published_ns: u64,
+    pub t_s: f64,
+    /// 0 = estimate valid; otherwise a [`crate::messages::EstimateStatus`] code and the
+    /// numeric fields are zero.
+    pub status: u32,
+    pub images_used: u32,
+    pub iterations: u32,
+    pub converged: u32,
+    /// (x, y, z), world ENU metres.
+    pub position: [f64; 3],
+    /// (δψ_L, δψ_R), degrees: measured yaw minus true yaw.
+    pub yaw_bias_deg: [f64; 2],
+    /// Covariance of (x, y, δψ_L, δψ_R), m² and rad², row-major.
+    pub covariance: [f64; 16],
+    /// Standard error of z, metres.
+    pub altitude_std_error_m: f64,
+}
+
+/// Why an [`EstimateMsg`] carries no estimate.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[repr(u32)]
+pub enum EstimateStatus {
+    Ok = 0,
+    /// The estimator rejected the observation set (reason in the geolocation log and
+    /// counters).
+    Rejected = 1,
+    /// The observation set itself was malformed (count, non-finite values).
+    BadInput = 2,
 }
 
 #[cfg(test)]
@@ -124,9 +244,24 @@ mod tests {
     }
 
     #[test]
+    fn message_sizes_are_fixed() {
+        assert_eq!(std::mem::size_of::<DetectionMsg>(), 96);
+        assert_eq!(std::mem::size_of::<ObservationEntry>(), 104);
+        assert_eq!(
+            std::mem::size_of::<ObservationSetMsg>(),
+            48 + 104 * MAX_OBSERVATIONS
+        );
+        let set = ObservationSetMsg {
+            count: 99,
+            ..Default::default()
+        };
+        assert_eq!(set.entries().len(), MAX_OBSERVATIONS);
+    }
+
+    #[test]
     fn header_layout_is_stable() {
-        // 8+8+8 + 1+3+4 + 4+4+4+4 + 6·8 = 96 bytes, 8-aligned, no hidden padding.
-        assert_eq!(std::mem::size_of::<FrameHeader>(), 96);
+        // 8+8+8+8 + 1+3+4 + 4+4+4+4 + 6·8 + 4·8 = 136 bytes, 8-aligned, no hidden padding.
+        assert_eq!(std::mem::size_of::<FrameHeader>(), 136);
         assert_eq!(std::mem::align_of::<FrameHeader>(), 8);
     }
 }

@@ -5,6 +5,7 @@
 //! ([`yolo`]). Detectors see pixels only, never truth.
 
 mod colour_blob;
+pub mod frame_view;
 pub mod yolo;
 
 pub use colour_blob::{ColourBlobConfig, ColourBlobDetector};
@@ -26,6 +27,8 @@ pub struct Detection {
 pub enum DetectError {
     #[error("frame must be 8-bit BGR (3 channels), got {channels} channels of depth {depth}")]
     BadFrame { channels: i32, depth: i32 },
+    #[error("bad frame layout: {0}")]
+    BadFrameLayout(String),
     #[error("invalid detector configuration: {0}")]
     Config(String),
     #[error("model {path}: {reason}")]

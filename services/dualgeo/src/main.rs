@@ -1,10 +1,12 @@
 //! `dualgeo`: the ground station's command line.
 //!
-//! `simulate` renders a scenario preset into a recording. Until the image pipeline lands (issue #5) `run`
-//! exercises the estimator on the built-in synthetic scenario (exact rays with the
-//! paper's navigation noise) and prints accuracy and solve time beside the one-shot
-//! baseline.
+//! - `run`: the main job: the four service processes over iceoryx2 (see `pipeline`).
+//! - `simulate`: renders a scenario preset into a recording.
+//! - `validate`: checks a recording completely.
+//! - `synthetic`: the estimator alone on exact synthetic rays with the paper's
+//!   navigation noise, beside the one-shot baseline.
 
+mod pipeline;
 mod simulate;
 mod synthetic_job;
 mod validate;
@@ -26,8 +28,11 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
-    /// Run the main job on the built-in default scenario.
-    Run(synthetic_job::RunArgs),
+    /// Run the pipeline (four processes over shared memory) on the live simulator or a
+    /// recording; prints the latency table and accuracy, writes track, report and plots.
+    Run(pipeline::RunArgs),
+    /// The estimator alone on exact synthetic rays (Monte Carlo), beside one-shot.
+    Synthetic(synthetic_job::RunArgs),
     /// Render a simulator preset into a recording.
     Simulate(simulate::SimulateArgs),
     /// Check a recording completely (every row and every image).
@@ -42,7 +47,8 @@ fn main() -> Result<()> {
         .with_writer(std::io::stderr)
         .init();
     match Cli::parse().command {
-        Command::Run(args) => synthetic_job::run(&args),
+        Command::Run(args) => pipeline::run(&args),
+        Command::Synthetic(args) => synthetic_job::run(&args),
         Command::Simulate(args) => simulate::run(&args),
         Command::Validate(args) => validate::run(&args),
     }

@@ -3,6 +3,7 @@
 use crate::EstimatorError;
 use nalgebra::{Point3, Vector2};
 use shared_types::conventions::{Attitude, Intrinsics, Uav};
+use shared_types::messages::{ObservationEntry, PoseSample};
 
 /// One image `g_k`: the measured state γ of its UAV when it was taken and the pixel of
 /// the target's *current* position P in it (from detection for the current images,
@@ -49,6 +50,56 @@ impl Observation {
     }
 }
 
+impl Observation {
+    /// The shared-memory form ([`ObservationEntry`]): pose in degrees, as recorded.
+    pub fn to_entry(&self) -> ObservationEntry {
+        let a = &self.attitude;
+        ObservationEntry {
+            uav: self.uav.index() as u8,
+            pose: PoseSample {
+                x_m: self.position.x,
+                y_m: self.position.y,
+                z_m: self.position.z,
+                yaw_deg: a.yaw.to_degrees(),
+                pitch_deg: a.pitch.to_degrees(),
+                roll_deg: a.roll.to_degrees(),
+            },
+            pixel: [self.pixel.x, self.pixel.y],
+            intrinsics: [
+                self.intrinsics.fx,
+                self.intrinsics.fy,
+                self.intrinsics.cx,
+                self.intrinsics.cy,
+            ],
+            ..Default::default()
+        }
+    }
+
+    /// Back from the shared-memory form; `index` names the entry in errors.
+    pub fn from_entry(entry: &ObservationEntry, index: usize) -> Result<Self, EstimatorError> {
+        let uav = match entry.uav {
+            0 => Uav::Left,
+            1 => Uav::Right,
+            _ => {
+                return Err(EstimatorError::NonFinite {
+                    index,
+                    what: "uav code",
+                })
+            }
+        };
+        let [fx, fy, cx, cy] = entry.intrinsics;
+        let o = Observation {
+            uav,
+            position: entry.pose.position(),
+            attitude: entry.pose.attitude(),
+            pixel: Vector2::new(entry.pixel[0], entry.pixel[1]),
+            intrinsics: Intrinsics::new(fx, fy, cx, cy),
+        };
+        o.validate(index)?;
+        Ok(o)
+    }
+}
+
 /// Validates a whole observation set: finite, both UAVs present, at least `needed` images.
 pub fn validate_set(observations: &[Observation], needed: usize) -> Result<(), EstimatorError> {
     let left = observations.iter().filter(|o| o.uav == Uav::Left).count();
@@ -64,4 +115,31 @@ pub fn validate_set(observations: &[Observation], needed: usize) -> Result<(), E
         .iter()
         .enumerate()
         .try_for_each(|(i, o)| o.validate(i))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn entry_round_trip_and_bad_uav() {
+        let o = Observation {
+            uav: Uav::Right,
+            position: Point3::new(1.0, -2.0, 100.0),
+            attitude: Attitude::from_degrees(30.0, 2.0, -1.0),
+            pixel: Vector2::new(320.5, 200.25),
+            intrinsics: Intrinsics::new(500.0, 501.0, 320.0, 240.0),
+        };
+        let back = Observation::from_entry(&o.to_entry(), 0).unwrap();
+        assert_eq!(back.uav, o.uav);
+        assert!((back.position - o.position).norm() < 1e-12);
+        assert!((back.attitude.yaw - o.attitude.yaw).abs() < 1e-12);
+        assert_eq!(back.pixel, o.pixel);
+        let mut bad = o.to_entry();
+        bad.uav = 7;
+        assert!(Observation::from_entry(&bad, 3).is_err());
+        let mut nan = o.to_entry();
+        nan.pixel[0] = f64::NAN;
+        assert!(Observation::from_entry(&nan, 3).is_err());
+    }
 }

@@ -37,6 +37,70 @@ pub struct FrameInput<'a> {
     pub height: u32,
 }
 
+impl FrameInput<'_> {
+    /// Everything but the pixels.
+    pub fn meta(&self) -> FrameMeta {
+        FrameMeta {
+            seq: self.seq,
+            t_s: self.t_s,
+            pose: self.pose,
+            detection: self.detection,
+            intrinsics: self.intrinsics,
+            width: self.width,
+            height: self.height,
+        }
+    }
+}
+
+/// A current frame without its pixels: what matching needs once ORB has run.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FrameMeta {
+    pub seq: u64,
+    pub t_s: f64,
+    pub pose: PoseSample,
+    pub detection: Option<[f64; 2]>,
+    pub intrinsics: Intrinsics,
+    pub width: u32,
+    pub height: u32,
+}
+
+/// The observation set of one pair: what the geolocation stage estimates from.
+#[derive(Debug, Clone, PartialEq)]
+pub struct MatchedSet {
+    /// The current left and right images with their detections.
+    pub current: [Observation; 2],
+    /// Past images that got a corresponding point (same order as `past`).
+    pub past_observations: Vec<Observation>,
+    pub past: Vec<PastMatch>,
+}
+
+/// Matching's answer for one pair.
+#[derive(Debug)]
+pub enum MatchOutcome {
+    NoDetection,
+    NotEnoughHistory { past: [usize; 2] },
+    Matched(Box<MatchedSet>),
+}
+
+/// The consistency filter and the iteration on a matched set (filtered), and the
+/// iteration on every image (unfiltered, Table 1's "before filtering").
+pub fn estimate_matched(set: &MatchedSet, estimator: &EstimatorConfig) -> Located {
+    let filtered = geolocate_filtered(
+        &set.current[0],
+        &set.current[1],
+        &set.past_observations,
+        estimator,
+    );
+    let mut all = set.current.to_vec();
+    all.extend_from_slice(&set.past_observations);
+    let unfiltered = geolocate(&all, estimator);
+    Located {
+        filtered,
+        unfiltered,
+        past: set.past.clone(),
+    }
+}
+
 /// A past image that got a corresponding point.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct PastMatch {
@@ -145,6 +209,11 @@ impl VisionChain {
         &self.rings
     }
 
+    /// ORB features of one frame (BGR or grey).
+    pub fn extract(&mut self, image: &cv::Mat) -> Result<Arc<Features>, ChainError> {
+        Ok(Arc::new(self.orb.extract(image)?))
+    }
+
     /// Locates the target of the current pair, then offers both frames to the rings.
     pub fn process(
         &mut self,
@@ -153,24 +222,34 @@ impl VisionChain {
     ) -> Result<ChainResult, ChainError> {
         let mut timing = ChainTiming::default();
         let t = Instant::now();
-        let features = [
-            Arc::new(self.orb.extract(left.image)?),
-            Arc::new(self.orb.extract(right.image)?),
-        ];
+        let features = [self.extract(left.image)?, self.extract(right.image)?];
         timing.orb_us = micros(t);
-
+        let (left, right) = (left.meta(), right.meta());
         let mut rejections = Vec::new();
-        let outcome = match (left.detection, right.detection) {
-            (Some(pl), Some(pr)) => self.locate(
-                [left, right],
-                [pl, pr],
-                &features,
-                &mut timing,
-                &mut rejections,
-            )?,
-            _ => ChainOutcome::NoDetection,
+        let matched =
+            self.match_current([&left, &right], &features, &mut timing, &mut rejections)?;
+        let outcome = match matched {
+            MatchOutcome::NoDetection => ChainOutcome::NoDetection,
+            MatchOutcome::NotEnoughHistory { past } => ChainOutcome::NotEnoughHistory { past },
+            MatchOutcome::Matched(set) => {
+                let t = Instant::now();
+                let located = estimate_matched(&set, &self.estimator);
+                timing.estimate_us = micros(t);
+                ChainOutcome::Located(Box::new(located))
+            }
         };
-        for (uav, frame) in [(Uav::Left, left), (Uav::Right, right)] {
+        self.admit([&left, &right], &features);
+        Ok(ChainResult {
+            outcome,
+            rejections,
+            timing,
+        })
+    }
+
+    /// Offers the current pair to the keyframe rings (the baseline constraint decides).
+    pub fn admit(&mut self, frames: [&FrameMeta; 2], features: &[Arc<Features>; 2]) {
+        for uav in [Uav::Left, Uav::Right] {
+            let frame = frames[uav.index()];
             self.rings[uav.index()].offer(Keyframe {
                 seq: frame.seq,
                 t_s: frame.t_s,
@@ -181,28 +260,29 @@ impl VisionChain {
                 features: features[uav.index()].clone(),
             });
         }
-        Ok(ChainResult {
-            outcome,
-            rejections,
-            timing,
-        })
     }
 
-    fn locate(
+    /// Section 2.3 for the current pair: the corresponding point of the current target
+    /// in each selected past image. Adds the matching, F/E and transfer times to
+    /// `timing` and every rejected past image to `rejections`.
+    pub fn match_current(
         &self,
-        current: [&FrameInput; 2],
-        detections: [[f64; 2]; 2],
+        current: [&FrameMeta; 2],
         features: &[Arc<Features>; 2],
         timing: &mut ChainTiming,
         rejections: &mut Vec<(Uav, u64, MatchReject)>,
-    ) -> Result<ChainOutcome, ChainError> {
+    ) -> Result<MatchOutcome, ChainError> {
+        let (Some(pl), Some(pr)) = (current[0].detection, current[1].detection) else {
+            return Ok(MatchOutcome::NoDetection);
+        };
+        let detections = [pl, pr];
         let wanted = self.config.images_per_uav - 1;
         let selected: [Vec<&Keyframe>; 2] = [Uav::Left, Uav::Right].map(|uav| {
             let frame = current[uav.index()];
             self.rings[uav.index()].select(&frame.pose, frame.seq, wanted)
         });
         if selected.iter().any(|s| s.len() < wanted) {
-            return Ok(ChainOutcome::NotEnoughHistory {
+            return Ok(MatchOutcome::NotEnoughHistory {
                 past: [selected[0].len(), selected[1].len()],
             });
         }
@@ -282,16 +362,9 @@ impl VisionChain {
             }
         }
 
-        let t = Instant::now();
-        let filtered =
-            geolocate_filtered(&current_obs[0], &current_obs[1], &past_obs, &self.estimator);
-        timing.estimate_us = micros(t);
-        let mut all = current_obs.to_vec();
-        all.extend_from_slice(&past_obs);
-        let unfiltered = geolocate(&all, &self.estimator);
-        Ok(ChainOutcome::Located(Box::new(Located {
-            filtered,
-            unfiltered,
+        Ok(MatchOutcome::Matched(Box::new(MatchedSet {
+            current: current_obs,
+            past_observations: past_obs,
             past,
         })))
     }

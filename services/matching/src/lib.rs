@@ -15,6 +15,7 @@ pub mod hamming;
 pub mod ring;
 
 pub use chain::{
-    ChainOutcome, ChainResult, ChainTiming, FrameInput, Located, PastMatch, VisionChain,
+    estimate_matched, ChainOutcome, ChainResult, ChainTiming, FrameInput, FrameMeta, Located,
+    MatchOutcome, MatchedSet, PastMatch, VisionChain,
 };
 pub use config::{FundamentalMethod, MatchingConfig, UsacLocalOptimisation, UsacScore};

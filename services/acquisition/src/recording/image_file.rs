@@ -36,6 +36,57 @@ fn check_container(path: &Path, bytes: &[u8]) -> Result<(), RecordingError> {
     Err(unreadable(path, "neither PNG nor JPEG"))
 }
 
+/// Reads and decodes an image file as 8-bit BGR straight into `dst` (packed rows,
+/// `width × height × 3` bytes: a loaned shared-memory sample), without an intermediate
+/// image. Grey images are expanded to BGR. Checks the container and the size.
+pub fn decode_image_into(
+    path: &Path,
+    width: u32,
+    height: u32,
+    dst: &mut [u8],
+) -> Result<(), RecordingError> {
+    let bytes = std::fs::read(path).map_err(|e| match e.kind() {
+        std::io::ErrorKind::NotFound => RecordingError::MissingFile { path: path.into() },
+        _ => RecordingError::io(path, e),
+    })?;
+    check_container(path, &bytes)?;
+    let expected = width as usize * height as usize * 3;
+    if dst.len() != expected {
+        return Err(unreadable(
+            path,
+            format!(
+                "destination holds {} bytes, a BGR frame needs {expected}",
+                dst.len()
+            ),
+        ));
+    }
+    let dst_ptr = dst.as_ptr();
+    let mut mat =
+        cv::Mat::new_rows_cols_with_bytes_mut::<cv::Vec3b>(height as i32, width as i32, dst)
+            .map_err(|e| unreadable(path, e.message))?;
+    let buf = cv::Vector::<u8>::from_slice(&bytes);
+    opencv::imgcodecs::imdecode_to(&buf, opencv::imgcodecs::IMREAD_COLOR, &mut mat)
+        .map_err(|e| unreadable(path, e.message))?;
+    if mat.empty() {
+        return Err(unreadable(
+            path,
+            "the decoder could not read it (corrupt data)",
+        ));
+    }
+    // A different size makes OpenCV allocate its own buffer instead of writing ours.
+    let (got_width, got_height) = (mat.cols() as u32, mat.rows() as u32);
+    if (got_width, got_height) != (width, height) || mat.data() != dst_ptr {
+        return Err(RecordingError::ImageSize {
+            path: path.into(),
+            want_width: width,
+            want_height: height,
+            got_width,
+            got_height,
+        });
+    }
+    Ok(())
+}
+
 /// Reads and decodes an image file, checking format, depth, channels and size.
 pub fn decode_image(path: &Path, width: u32, height: u32) -> Result<cv::Mat, RecordingError> {
     let bytes = std::fs::read(path).map_err(|e| match e.kind() {
@@ -73,4 +124,46 @@ pub fn decode_image(path: &Path, width: u32, height: u32) -> Result<cv::Mat, Rec
         });
     }
     Ok(mat)
+}
+
+#[cfg(test)]
+mod decode_into_tests {
+    use super::*;
+
+    fn png(width: i32, height: i32) -> Vec<u8> {
+        let mut m =
+            cv::Mat::new_rows_cols_with_default(height, width, cv::CV_8UC3, cv::Scalar::all(0.0))
+                .unwrap();
+        for (i, b) in m.data_bytes_mut().unwrap().iter_mut().enumerate() {
+            *b = (i % 251) as u8;
+        }
+        let mut out = cv::Vector::<u8>::new();
+        opencv::imgcodecs::imencode_def(".png", &m, &mut out).unwrap();
+        out.to_vec()
+    }
+
+    #[test]
+    fn decodes_in_place_and_rejects_a_wrong_size() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("a.png");
+        std::fs::write(&path, png(8, 4)).unwrap();
+        let mut dst = vec![0u8; 8 * 4 * 3];
+        decode_image_into(&path, 8, 4, &mut dst).unwrap();
+        assert!(dst.iter().enumerate().all(|(i, &b)| b == (i % 251) as u8));
+
+        std::fs::write(&path, png(6, 4)).unwrap();
+        let e = decode_image_into(&path, 8, 4, &mut dst).unwrap_err();
+        assert!(
+            matches!(e, RecordingError::ImageSize { got_width: 6, .. }),
+            "{e}"
+        );
+
+        let mut bytes = png(8, 4);
+        bytes.truncate(bytes.len() - 20);
+        std::fs::write(&path, bytes).unwrap();
+        let e = decode_image_into(&path, 8, 4, &mut dst)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("a.png") && e.contains("truncated"), "{e}");
+    }
 }

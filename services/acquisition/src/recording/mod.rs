@@ -6,13 +6,17 @@ mod image_file;
 mod meta;
 mod reader;
 mod rows;
+mod stream_log;
 mod writer;
 
 pub use error::{CsvPlace, RecordingError};
-pub use image_file::decode_image;
+pub use image_file::{decode_image, decode_image_into};
 pub use meta::{CameraMeta, Origin, RecordingMeta, UavMeta, UavPair, FORMAT_NAME, FORMAT_VERSION};
 pub use reader::{Recording, StereoPair};
-pub use rows::{TelemetryRow, TruthRow, TELEMETRY_HEADER, TRUTH_HEADER};
+pub use rows::{
+    read_telemetry, read_truth, TelemetryRow, TruthRow, TELEMETRY_HEADER, TRUTH_HEADER,
+};
+pub use stream_log::StreamLog;
 pub use writer::{RecordingWriter, TruthSample};
 
 pub const META_FILE: &str = "recording.toml";

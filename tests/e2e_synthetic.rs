@@ -49,7 +49,7 @@ fn proposed_row(stdout: &str, images: usize) -> Vec<f64> {
 
 #[test]
 fn run_prints_accuracy_table_for_the_default_scenario() {
-    let out = dualgeo(&["run", "--trials", "120"]);
+    let out = dualgeo(&["synthetic", "--trials", "120"]);
     let (stdout, stderr) = text(&out);
     assert!(out.status.success(), "stdout:\n{stdout}\nstderr:\n{stderr}");
     assert!(stdout.contains("synthetic-ray mode"), "{stdout}");
@@ -83,8 +83,24 @@ fn run_prints_accuracy_table_for_the_default_scenario() {
 
 #[test]
 fn same_seed_same_numbers() {
-    let a = dualgeo(&["run", "--trials", "40", "--images", "8", "--seed", "7"]);
-    let b = dualgeo(&["run", "--trials", "40", "--images", "8", "--seed", "7"]);
+    let a = dualgeo(&[
+        "synthetic",
+        "--trials",
+        "40",
+        "--images",
+        "8",
+        "--seed",
+        "7",
+    ]);
+    let b = dualgeo(&[
+        "synthetic",
+        "--trials",
+        "40",
+        "--images",
+        "8",
+        "--seed",
+        "7",
+    ]);
     let strip = |o: &Output| {
         // Solve times vary run to run; compare everything before them.
         proposed_row(&text(o).0, 8)[..8].to_vec()
@@ -94,7 +110,7 @@ fn same_seed_same_numbers() {
 
 #[test]
 fn bad_arguments_fail_with_a_clear_message() {
-    let out = dualgeo(&["run", "--images", "5"]);
+    let out = dualgeo(&["synthetic", "--images", "5"]);
     assert!(!out.status.success());
     assert!(
         text(&out).1.contains("even counts of at least 4"),
@@ -102,7 +118,7 @@ fn bad_arguments_fail_with_a_clear_message() {
         text(&out).1
     );
 
-    let out = dualgeo(&["run", "--sigma-att-deg", "NaN"]);
+    let out = dualgeo(&["synthetic", "--sigma-att-deg", "NaN"]);
     assert!(!out.status.success());
     assert!(
         text(&out).1.contains("--sigma-att-deg must be finite"),
@@ -118,7 +134,7 @@ fn config_file_is_read_and_bad_ones_are_named() {
         "max_iterations = 3\n[noise_left]\nsigma_yaw_deg = 4.0\n",
     );
     let out = dualgeo(&[
-        "run",
+        "synthetic",
         "--trials",
         "20",
         "--images",
@@ -129,7 +145,7 @@ fn config_file_is_read_and_bad_ones_are_named() {
     assert!(out.status.success(), "{}", text(&out).1);
 
     let bad = TempFile::new("bad.toml", "max_iteratons = 3\n");
-    let out = dualgeo(&["run", "--config", bad.0.to_str().unwrap()]);
+    let out = dualgeo(&["synthetic", "--config", bad.0.to_str().unwrap()]);
     let stderr = text(&out).1;
     assert!(!out.status.success());
     assert!(
@@ -138,7 +154,7 @@ fn config_file_is_read_and_bad_ones_are_named() {
     );
 
     let invalid = TempFile::new("invalid.toml", "max_iterations = 0\n");
-    let out = dualgeo(&["run", "--config", invalid.0.to_str().unwrap()]);
+    let out = dualgeo(&["synthetic", "--config", invalid.0.to_str().unwrap()]);
     assert!(!out.status.success());
     assert!(
         text(&out).1.contains("max_iterations must be at least 1"),

@@ -1,0 +1,393 @@
+//! `dualgeo-acquisition`: the acquisition service shell. Streams stereo pairs from the
+//! live simulator or a recording into the frame services: each frame is rendered or
+//! decoded *directly into a loaned shared-memory sample* (the only write of its pixels),
+//! stamped, sent, and the detection and matching stages are woken.
+//!
+//! Acquisition never blocks: when no sample can be loaned (every buffer in use), the pair
+//! is dropped and counted (`pairs_dropped`). A corrupt image in a recording is logged
+//! with its path and counted (`bad_frames`); its pair is skipped and the stream goes on.
+//! At the end of the stream the supervisor is woken with the end-of-stream event and
+//! the process idles until it is told to stop (SIGTERM), so nothing it sent is lost.
+//!
+//! Histograms (µs): `produce` (render or decode of a pair), `pacing_lag` (how late a
+//! pair left against its schedule). Counters: `pairs_in`, `frames_in`, `pairs_dropped`,
+//! `bad_frames`, `loops`.
+
+use acquisition::recording::{
+    decode_image_into, Recording, StereoPair, StreamLog, TelemetryRow, TruthRow,
+};
+use acquisition::sim::{Presets, SimConfig, Simulator};
+use anyhow::{bail, Context, Result};
+use clap::Parser;
+use iceoryx2::prelude::EventId;
+use shared_types::clock::{elapsed_us, monotonic_ns};
+use shared_types::conventions::{Intrinsics, Uav};
+use shared_types::messages::{FrameHeader, PixelFormat, PoseSample};
+use shared_types::shell::{init_tracing, ServiceArgs};
+use shared_types::stats::StageStats;
+use shared_types::transport::{Endpoint, FramePublisher, Stage, END_OF_STREAM_EVENT};
+use std::path::PathBuf;
+use std::time::Duration;
+
+#[derive(Parser)]
+#[command(about = "dualgeo acquisition service (started by `dualgeo run`)")]
+struct Args {
+    #[command(flatten)]
+    service: ServiceArgs,
+    /// `sim` (the live simulator) or a recording directory.
+    #[arg(long, default_value = "sim")]
+    source: String,
+    /// Simulator preset.
+    #[arg(long, default_value = "default")]
+    preset: String,
+    /// A presets file instead of the built-in one.
+    #[arg(long)]
+    presets: Option<PathBuf>,
+    /// Simulator: override the preset's duration, seconds.
+    #[arg(long)]
+    duration_s: Option<f64>,
+    /// Simulator: override the preset's noise seed.
+    #[arg(long)]
+    seed: Option<u64>,
+    /// `realtime` (the recorded/simulated clock), `max` (as fast as possible) or a pair
+    /// rate in Hz.
+    #[arg(long, default_value = "realtime")]
+    rate: String,
+    /// Start again at the end (soak runs); stops on SIGINT/SIGTERM.
+    #[arg(long = "loop")]
+    looping: bool,
+    /// Simulator: write what was streamed (telemetry.csv, truth.csv) here.
+    #[arg(long)]
+    log_dir: Option<PathBuf>,
+}
+
+#[derive(Debug, Clone, Copy)]
+enum Rate {
+    Realtime,
+    Max,
+    Hz(f64),
+}
+
+fn parse_rate(s: &str) -> Result<Rate> {
+    match s {
+        "realtime" => Ok(Rate::Realtime),
+        "max" => Ok(Rate::Max),
+        other => match other.parse::<f64>() {
+            Ok(hz) if hz.is_finite() && hz > 0.0 => Ok(Rate::Hz(hz)),
+            _ => bail!("--rate must be realtime, max or a positive number of Hz, got {other:?}"),
+        },
+    }
+}
+
+/// One pair's description, filled by the source.
+struct PairInfo {
+    t_s: f64,
+    poses: [PoseSample; 2],
+    truth: Option<[TruthRow; 2]>,
+}
+
+enum Source {
+    Sim {
+        config: Box<SimConfig>,
+        sim: Box<Simulator>,
+    },
+    Recording {
+        rec: Box<Recording>,
+        pairs: Vec<StereoPair>,
+        next: usize,
+    },
+}
+
+impl Source {
+    fn open(args: &Args) -> Result<Self> {
+        if args.source == "sim" {
+            let presets = match &args.presets {
+                Some(p) => Presets::from_file(p)?,
+                None => Presets::builtin(),
+            };
+            let mut config = presets.get(&args.preset)?;
+            if let Some(d) = args.duration_s {
+                config.duration_s = d;
+            }
+            if let Some(s) = args.seed {
+                config.seed = s;
+            }
+            let sim = Box::new(Simulator::new(config.clone())?);
+            Ok(Source::Sim {
+                config: Box::new(config),
+                sim,
+            })
+        } else {
+            let rec = Recording::open(&args.source)?;
+            let pairs = rec.pairs();
+            if pairs.is_empty() {
+                bail!(
+                    "{}: no stereo pairs (left and right images within half a frame period)",
+                    args.source
+                );
+            }
+            let widths = [Uav::Left, Uav::Right].map(|u| rec.meta.uav(u).camera);
+            if widths[0].width != widths[1].width || widths[0].height != widths[1].height {
+                bail!(
+                    "{}: left and right cameras must have the same image size",
+                    args.source
+                );
+            }
+            Ok(Source::Recording {
+                rec: Box::new(rec),
+                pairs,
+                next: 0,
+            })
+        }
+    }
+
+    fn size(&self) -> (u32, u32) {
+        match self {
+            Source::Sim { config, .. } => (config.camera.width, config.camera.height),
+            Source::Recording { rec, .. } => {
+                let c = rec.meta.uav(Uav::Left).camera;
+                (c.width, c.height)
+            }
+        }
+    }
+
+    fn intrinsics(&self, uav: Uav) -> Intrinsics {
+        match self {
+            Source::Sim { sim, .. } => sim.intrinsics(),
+            Source::Recording { rec, .. } => rec.meta.uav(uav).camera.intrinsics(),
+        }
+    }
+
+    fn period_s(&self) -> f64 {
+        match self {
+            Source::Sim { config, .. } => 1.0 / config.frame_rate_hz,
+            Source::Recording { rec, .. } => 1.0 / rec.meta.frame_rate_hz,
+        }
+    }
+
+    /// Starts again from the first pair.
+    fn rewind(&mut self) -> Result<()> {
+        match self {
+            Source::Sim { config, sim } => **sim = Simulator::new((**config).clone())?,
+            Source::Recording { next, .. } => *next = 0,
+        }
+        Ok(())
+    }
+
+    /// Writes the next pair into `left` and `right`; `Ok(None)` at the end of the stream;
+    /// `Err` for a pair that could not be produced (the stream goes on).
+    fn next_pair(
+        &mut self,
+        left: &mut [u8],
+        right: &mut [u8],
+        stride: usize,
+    ) -> Option<Result<PairInfo>> {
+        match self {
+            Source::Sim { sim, .. } => {
+                let step = sim.step()?;
+                sim.render_pair(&step, left, right, stride);
+                let truth = step.frames.each_ref().map(|f| TruthRow {
+                    uav: f.uav,
+                    frame: f.seq,
+                    t_s: f.t_s,
+                    pose: f.true_pose,
+                    target: f.target,
+                    target_px: f.target_px,
+                });
+                Some(Ok(PairInfo {
+                    t_s: step.frames[0].t_s,
+                    poses: [step.frames[0].measured, step.frames[1].measured],
+                    truth: Some(truth),
+                }))
+            }
+            Source::Recording { rec, pairs, next } => {
+                let pair = *pairs.get(*next)?;
+                *next += 1;
+                let result = (|| -> Result<PairInfo> {
+                    for (index, dst) in [(pair.left, left), (pair.right, right)] {
+                        let row = &rec.telemetry[index];
+                        let camera = rec.meta.uav(row.uav).camera;
+                        decode_image_into(
+                            &rec.root.join(&row.file),
+                            camera.width,
+                            camera.height,
+                            dst,
+                        )?;
+                    }
+                    Ok(PairInfo {
+                        t_s: rec.telemetry[pair.left].t_s,
+                        poses: [
+                            rec.telemetry[pair.left].pose,
+                            rec.telemetry[pair.right].pose,
+                        ],
+                        truth: None,
+                    })
+                })();
+                Some(result)
+            }
+        }
+    }
+}
+
+fn main() -> Result<()> {
+    let args = Args::parse();
+    init_tracing("acquisition");
+    let rate = parse_rate(&args.rate)?;
+    let mut source = Source::open(&args)?;
+    let (width, height) = source.size();
+    let stride = width as usize * 3;
+    let frame_bytes = stride * height as usize;
+    let endpoint = Endpoint::new(&args.service.run_id, "acquisition")?;
+    let publishers: [FramePublisher; 2] = [
+        endpoint.frame_publisher(Uav::Left, frame_bytes)?,
+        endpoint.frame_publisher(Uav::Right, frame_bytes)?,
+    ];
+    let wake = [
+        endpoint.notifier(Stage::Detection)?,
+        endpoint.notifier(Stage::Matching)?,
+    ];
+    let wake_supervisor = endpoint.notifier(Stage::Supervisor)?;
+    let mut log = match (&source, &args.log_dir) {
+        (Source::Sim { .. }, Some(dir)) => Some(StreamLog::create(dir)?),
+        _ => None,
+    };
+    let intrinsics = [Uav::Left, Uav::Right].map(|u| {
+        let k = source.intrinsics(u);
+        [k.fx, k.fy, k.cx, k.cy]
+    });
+    let mut stats = StageStats::new("acquisition");
+    tracing::info!(run = endpoint.run_id(), source = %args.source, width, height, ?rate, "acquisition streaming");
+
+    let start_ns = monotonic_ns();
+    let (mut seq, mut t_offset, mut t_first, mut last_t) = (0u64, 0.0f64, None::<f64>, 0.0f64);
+    let mut signalled = false;
+    'stream: loop {
+        // Loan both samples first: a pair is only produced when both fit.
+        let loans = (
+            publishers[0].loan_slice(frame_bytes),
+            publishers[1].loan_slice(frame_bytes),
+        );
+        let (Ok(mut left), Ok(mut right)) = loans else {
+            stats.count("pairs_dropped", 1);
+            // Every sample is in use downstream; try again at the next frame time.
+            if endpoint
+                .node
+                .wait(Duration::from_secs_f64(source.period_s()))
+                .is_err()
+            {
+                signalled = true;
+                break 'stream;
+            }
+            continue;
+        };
+        let produce_start = monotonic_ns();
+        let info = match source.next_pair(left.payload_mut(), right.payload_mut(), stride) {
+            None => {
+                if args.looping {
+                    source.rewind()?;
+                    t_offset += last_t + source.period_s() - t_first.unwrap_or(0.0);
+                    t_first = None;
+                    stats.count("loops", 1);
+                    continue;
+                }
+                break 'stream;
+            }
+            Some(Err(e)) => {
+                tracing::warn!("pair skipped: {e:#}");
+                stats.count("bad_frames", 1);
+                continue;
+            }
+            Some(Ok(info)) => info,
+        };
+        let captured = monotonic_ns();
+        stats.record("produce", elapsed_us(produce_start, captured));
+        let t_first_pair = *t_first.get_or_insert(info.t_s);
+        last_t = info.t_s;
+        let t_stream = info.t_s - t_first_pair + t_offset;
+        // Pace: the pair leaves at its scheduled time (never earlier).
+        let due_s = match rate {
+            Rate::Realtime => Some(t_stream),
+            Rate::Hz(hz) => Some(seq as f64 / hz),
+            Rate::Max => None,
+        };
+        if let Some(due) = due_s {
+            let due_ns = start_ns + (due * 1e9) as u64;
+            let now = monotonic_ns();
+            if due_ns > now
+                && endpoint
+                    .node
+                    .wait(Duration::from_nanos(due_ns - now))
+                    .is_err()
+            {
+                signalled = true;
+                break 'stream;
+            }
+            stats.record("pacing_lag", elapsed_us(due_ns, monotonic_ns()));
+        }
+        for (uav, sample) in [(Uav::Left, &mut left), (Uav::Right, &mut right)] {
+            *sample.user_header_mut() = FrameHeader {
+                seq,
+                capture_ns: captured,
+                t_s: info.t_s + t_offset,
+                uav: uav.index() as u8,
+                pixel_format: PixelFormat::Bgr8 as u32,
+                width,
+                height,
+                stride: stride as u32,
+                pose: info.poses[uav.index()],
+                intrinsics: intrinsics[uav.index()],
+                ..Default::default()
+            };
+        }
+        if let (Some(log), Some(truth)) = (log.as_mut(), &info.truth) {
+            for (uav, t) in truth.iter().enumerate() {
+                let telemetry = TelemetryRow {
+                    uav: t.uav,
+                    frame: seq,
+                    file: "live".into(),
+                    t_s: info.t_s + t_offset,
+                    pose: info.poses[uav],
+                };
+                let truth = TruthRow {
+                    frame: seq,
+                    t_s: info.t_s + t_offset,
+                    ..t.clone()
+                };
+                log.append(&telemetry, &truth)?;
+            }
+        }
+        for mut sample in [left, right] {
+            sample.user_header_mut().published_ns = monotonic_ns();
+            sample.send().context("send frame")?;
+        }
+        for w in &wake {
+            w.notify().context("wake a stage")?;
+        }
+        stats.count("pairs_in", 1);
+        stats.count("frames_in", 2);
+        seq += 1;
+        if rate_is_max_and_signalled(&endpoint, rate) {
+            signalled = true;
+            break 'stream;
+        }
+    }
+    if let Some(log) = log {
+        log.finish()?;
+    }
+    if !signalled {
+        tracing::info!(pairs = seq, "end of stream");
+        wake_supervisor
+            .notify_with_custom_event_id(EventId::new(END_OF_STREAM_EVENT))
+            .context("tell the supervisor the stream ended")?;
+        // Stay until the supervisor stops us: what was sent stays readable.
+        while endpoint.node.wait(Duration::from_millis(200)).is_ok() {}
+    }
+    let path = stats.save(&args.service.stats_dir)?;
+    tracing::info!(stats = %path.display(), "acquisition stopped");
+    Ok(())
+}
+
+/// In `--rate max` nothing else waits, so look for a stop request once per pair.
+fn rate_is_max_and_signalled(endpoint: &Endpoint, rate: Rate) -> bool {
+    matches!(rate, Rate::Max) && endpoint.node.wait(Duration::ZERO).is_err()
+}

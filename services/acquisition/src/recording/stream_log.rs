@@ -1,0 +1,65 @@
+//! What a live source streamed, in the recording format's CSV layouts: `telemetry.csv`
+//! (the measured poses the pipeline saw) and `truth.csv` (the simulator's truth, for
+//! evaluation only). The `file` column says `live` because no image file exists.
+
+use super::rows::{telemetry_record, truth_record};
+use super::{
+    RecordingError, TelemetryRow, TruthRow, TELEMETRY_FILE, TELEMETRY_HEADER, TRUTH_FILE,
+    TRUTH_HEADER,
+};
+use std::fs::File;
+use std::path::{Path, PathBuf};
+
+pub struct StreamLog {
+    dir: PathBuf,
+    telemetry: csv::Writer<File>,
+    truth: csv::Writer<File>,
+}
+
+fn err(path: &Path, e: impl std::fmt::Display) -> RecordingError {
+    RecordingError::Write {
+        path: path.into(),
+        message: e.to_string(),
+    }
+}
+
+impl StreamLog {
+    /// Creates `dir` (if needed) with the two CSV files and their headers.
+    pub fn create(dir: &Path) -> Result<Self, RecordingError> {
+        std::fs::create_dir_all(dir).map_err(|e| RecordingError::io(dir, e))?;
+        let open = |name: &str, header: &[&str]| -> Result<csv::Writer<File>, RecordingError> {
+            let path = dir.join(name);
+            let mut w = csv::Writer::from_path(&path).map_err(|e| err(&path, e))?;
+            w.write_record(header).map_err(|e| err(&path, e))?;
+            Ok(w)
+        };
+        Ok(Self {
+            dir: dir.to_path_buf(),
+            telemetry: open(TELEMETRY_FILE, &TELEMETRY_HEADER)?,
+            truth: open(TRUTH_FILE, &TRUTH_HEADER)?,
+        })
+    }
+
+    pub fn append(
+        &mut self,
+        telemetry: &TelemetryRow,
+        truth: &TruthRow,
+    ) -> Result<(), RecordingError> {
+        self.telemetry
+            .write_record(telemetry_record(telemetry))
+            .map_err(|e| err(&self.dir.join(TELEMETRY_FILE), e))?;
+        self.truth
+            .write_record(truth_record(truth))
+            .map_err(|e| err(&self.dir.join(TRUTH_FILE), e))
+    }
+
+    /// Flushes both files.
+    pub fn finish(mut self) -> Result<(), RecordingError> {
+        self.telemetry
+            .flush()
+            .map_err(|e| err(&self.dir.join(TELEMETRY_FILE), e))?;
+        self.truth
+            .flush()
+            .map_err(|e| err(&self.dir.join(TRUTH_FILE), e))
+    }
+}

@@ -1,0 +1,103 @@
+//! `dualgeo-detection`: the detection service shell. Wakes when acquisition publishes a
+//! frame, reads the pixels in place (a `Mat` header over the shared-memory sample),
+//! runs the configured detector and publishes a [`DetectionMsg`] per frame.
+//!
+//! Histograms (µs): `transport` (frame publish → this stage woke, first frame of a
+//! wake-up), `wait` (frame publish → processing starts), `compute` (detection).
+//! Counters: `frames`, `found`, `frames_lost` (sequence gaps: overwritten while busy),
+//! `bad_frames`.
+
+use anyhow::{Context, Result};
+use clap::Parser;
+use detection::frame_view::frame_mat;
+use detection::{ColourBlobConfig, ColourBlobDetector, Detector};
+use shared_types::clock::{elapsed_us, monotonic_ns};
+use shared_types::conventions::Uav;
+use shared_types::messages::DetectionMsg;
+use shared_types::service_names::Topic;
+use shared_types::shell::{init_tracing, load_section, serve, SeqGaps, ServiceArgs};
+use shared_types::stats::StageStats;
+use shared_types::transport::{Endpoint, Stage};
+
+#[derive(Parser)]
+#[command(about = "dualgeo detection service (started by `dualgeo run`)")]
+struct Args {
+    #[command(flatten)]
+    service: ServiceArgs,
+}
+
+fn main() -> Result<()> {
+    let args = Args::parse();
+    init_tracing("detection");
+    let config: ColourBlobConfig = load_section(args.service.config.as_deref(), "detection")?;
+    let mut detector = ColourBlobDetector::new(config).context("detector configuration")?;
+    let endpoint = Endpoint::new(&args.service.run_id, "detection")?;
+    let frames = [
+        endpoint.frame_subscriber(Uav::Left)?,
+        endpoint.frame_subscriber(Uav::Right)?,
+    ];
+    let publisher = endpoint.publisher::<DetectionMsg>(Topic::Detections)?;
+    let wake_matching = endpoint.notifier(Stage::Matching)?;
+    let listener = endpoint.listener(Stage::Detection)?;
+    let mut stats = StageStats::new("detection");
+    let mut gaps = [SeqGaps::default(); 2];
+    tracing::info!(run = endpoint.run_id(), "detection ready");
+
+    let stop = serve(&listener, |wake| -> Result<bool> {
+        let mut first = true;
+        for (uav, subscriber) in frames.iter().enumerate() {
+            while let Some(sample) = subscriber.receive().context("receive frame")? {
+                let header = *sample.user_header();
+                if first {
+                    if let Some(us) = wake.hop_us(header.published_ns) {
+                        stats.record("transport", us);
+                    }
+                    first = false;
+                }
+                let start = monotonic_ns();
+                stats.record("wait", elapsed_us(header.published_ns, start));
+                stats.count("frames", 1);
+                stats.count("frames_lost", gaps[uav].see(header.seq));
+                let found = match frame_mat(&header, sample.payload()) {
+                    Ok(mat) => match detector.detect(&mat) {
+                        Ok(d) => d,
+                        Err(e) => {
+                            tracing::warn!(seq = header.seq, uav, "detector failed: {e}");
+                            stats.count("bad_frames", 1);
+                            None
+                        }
+                    },
+                    Err(e) => {
+                        tracing::warn!(seq = header.seq, uav, "frame rejected: {e}");
+                        stats.count("bad_frames", 1);
+                        None
+                    }
+                };
+                drop(sample);
+                let mut msg = DetectionMsg {
+                    seq: header.seq,
+                    capture_ns: header.capture_ns,
+                    t_s: header.t_s,
+                    uav: header.uav,
+                    ..Default::default()
+                };
+                if let Some(d) = found {
+                    stats.count("found", 1);
+                    msg.found = 1;
+                    msg.bbox = d.bbox;
+                    msg.centre = d.centre;
+                    msg.confidence = d.confidence as f64;
+                }
+                let done = monotonic_ns();
+                stats.record("compute", elapsed_us(start, done));
+                msg.published_ns = monotonic_ns();
+                publisher.send_copy(msg).context("publish detection")?;
+                wake_matching.notify().context("wake matching")?;
+            }
+        }
+        Ok(true)
+    })?;
+    let path = stats.save(&args.service.stats_dir)?;
+    tracing::info!(?stop, stats = %path.display(), "detection stopped");
+    Ok(())
+}

@@ -1,0 +1,128 @@
+//! The service processes: spawn, watch, stop, reap.
+//!
+//! Each child gets its own process group (so a terminal's Ctrl-C reaches only the
+//! supervisor, which then stops the children in order) and `PR_SET_PDEATHSIG` (so a
+//! killed supervisor does not leave orphans streaming). Every child is reaped with
+//! `waitpid` (through `std::process::Child`), which is what lets iceoryx2 see a dead
+//! node as dead.
+
+use anyhow::{anyhow, Context, Result};
+use std::os::unix::process::{CommandExt, ExitStatusExt};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, ExitStatus};
+use std::time::{Duration, Instant};
+
+pub const SERVICES: [&str; 4] = ["acquisition", "detection", "matching", "geolocation"];
+
+/// Where the service binaries are: next to the running `dualgeo`.
+pub fn service_binary(name: &str) -> Result<PathBuf> {
+    let exe = std::env::current_exe().context("locate the dualgeo binary")?;
+    let dir = exe
+        .parent()
+        .ok_or_else(|| anyhow!("{} has no parent directory", exe.display()))?;
+    let path = dir.join(format!("dualgeo-{name}"));
+    if !path.is_file() {
+        return Err(anyhow!(
+            "service binary {} not found. The four services are built with the workspace: \
+             run `cargo build --release --workspace` (README's first command does).",
+            path.display()
+        ));
+    }
+    Ok(path)
+}
+
+pub struct Service {
+    pub name: &'static str,
+    child: Child,
+    exited: Option<ExitStatus>,
+}
+
+pub fn describe(status: ExitStatus) -> String {
+    match (status.code(), status.signal()) {
+        (Some(code), _) => format!("exit code {code}"),
+        (None, Some(sig)) => format!("signal {sig}"),
+        _ => status.to_string(),
+    }
+}
+
+impl Service {
+    pub fn spawn(name: &'static str, args: &[String], log_dir: &Path) -> Result<Self> {
+        let binary = service_binary(name)?;
+        let mut cmd = Command::new(&binary);
+        cmd.args(args);
+        // Own process group; die with the supervisor.
+        // SAFETY: only async-signal-safe calls (setpgid, prctl) between fork and exec.
+        unsafe {
+            cmd.pre_exec(|| {
+                if libc::setpgid(0, 0) != 0 {
+                    return Err(std::io::Error::last_os_error());
+                }
+                if libc::prctl(libc::PR_SET_PDEATHSIG, libc::SIGTERM) != 0 {
+                    return Err(std::io::Error::last_os_error());
+                }
+                Ok(())
+            });
+        }
+        let _ = log_dir;
+        let child = cmd
+            .spawn()
+            .with_context(|| format!("start the {name} service ({})", binary.display()))?;
+        Ok(Self {
+            name,
+            child,
+            exited: None,
+        })
+    }
+
+    /// Reaps the child if it has exited (non-blocking).
+    pub fn poll(&mut self) -> Result<Option<ExitStatus>> {
+        if self.exited.is_none() {
+            self.exited = self
+                .child
+                .try_wait()
+                .with_context(|| format!("wait for {}", self.name))?;
+        }
+        Ok(self.exited)
+    }
+
+    /// SIGTERM, then SIGKILL after `grace`; always reaps.
+    pub fn stop(&mut self, grace: Duration) -> Result<ExitStatus> {
+        if let Some(s) = self.poll()? {
+            return Ok(s);
+        }
+        let pid = self.child.id() as libc::pid_t;
+        // SAFETY: plain kill(2) on our own child's pid, which is not yet reaped.
+        unsafe { libc::kill(pid, libc::SIGTERM) };
+        let deadline = Instant::now() + grace;
+        while Instant::now() < deadline {
+            if let Some(s) = self.poll()? {
+                return Ok(s);
+            }
+            std::thread::sleep(Duration::from_millis(10));
+        }
+        tracing::warn!(
+            service = self.name,
+            "did not stop within {grace:?}; killing it"
+        );
+        let _ = self.child.kill();
+        let status = self
+            .child
+            .wait()
+            .with_context(|| format!("reap {}", self.name))?;
+        self.exited = Some(status);
+        Ok(status)
+    }
+}
+
+/// Stops every service (last started first) and reports the ones that did not exit 0.
+pub fn stop_all(services: &mut [Service], grace: Duration) -> Vec<String> {
+    let mut failures = Vec::new();
+    for s in services.iter_mut().rev() {
+        match s.stop(grace) {
+            Ok(status) if status.success() => {}
+            Ok(status) => failures.push(format!("{} ended with {}", s.name, describe(status))),
+            Err(e) => failures.push(format!("{}: {e:#}", s.name)),
+        }
+    }
+    failures
+}

@@ -1,0 +1,186 @@
+//! `dualgeo run`: the supervisor of the four service processes.
+//!
+//! 1. Starts detection, matching and geolocation, and waits until every one of them is
+//!    connected (subscribers and listeners counted through iceoryx2).
+//! 2. Starts acquisition, which streams the live simulator (default) or a recording.
+//! 3. Collects the estimates (event-driven: a WaitSet on its wake listener, with a
+//!    100 ms tick for the progress bar and to watch the children).
+//! 4. On end of stream (after the pipeline has drained), SIGINT or SIGTERM: stops the
+//!    services, gathers their latency histograms and counters, and writes the outputs
+//!    (`outputs.rs`). A service that dies or fails to start ends the run with its name,
+//!    its exit status and a non-zero exit.
+
+mod accuracy;
+mod children;
+mod collect;
+mod latency;
+mod outputs;
+mod plots;
+
+use anyhow::{bail, Context, Result};
+use children::Service;
+use shared_types::service_names::new_run_id;
+use shared_types::transport::clean_dead_nodes;
+use std::path::{Path, PathBuf};
+use std::time::Duration;
+
+#[derive(Debug, clap::Args)]
+pub struct RunArgs {
+    /// `sim` (the live simulator) or a recording directory.
+    #[arg(long, default_value = "sim")]
+    pub source: String,
+    /// Simulator preset (see `dualgeo simulate --list`).
+    #[arg(long, default_value = "default")]
+    pub preset: String,
+    /// A presets file instead of the built-in one.
+    #[arg(long)]
+    pub presets: Option<PathBuf>,
+    /// Simulator: override the preset's duration, seconds.
+    #[arg(long)]
+    pub duration_s: Option<f64>,
+    /// Simulator: override the preset's noise seed.
+    #[arg(long)]
+    pub seed: Option<u64>,
+    /// `realtime` (the recording's clock; the simulator's 30 FPS), `max`, or pairs/s.
+    #[arg(long, default_value = "realtime")]
+    pub rate: String,
+    /// Stream the source again and again until SIGINT/SIGTERM (soak runs).
+    #[arg(long = "loop")]
+    pub looping: bool,
+    /// Output directory (created; existing outputs in it are replaced).
+    #[arg(long, default_value = "dualgeo-out")]
+    pub out: PathBuf,
+    /// Configuration: TOML with [matching], [estimator] and [detection] sections.
+    #[arg(long)]
+    pub config: Option<PathBuf>,
+    /// Seconds to wait for the services to connect.
+    #[arg(long, default_value_t = 30.0)]
+    pub connect_timeout_s: f64,
+}
+
+/// Checks every section of the configuration before any process starts.
+fn check_config(path: &Path) -> Result<()> {
+    use shared_types::shell::load_section;
+    load_section::<matching::MatchingConfig>(Some(path), "matching")?
+        .validate()
+        .map_err(anyhow::Error::msg)
+        .context("[matching]")?;
+    load_section::<geolocation::EstimatorConfig>(Some(path), "estimator")?
+        .validate()
+        .context("[estimator]")?;
+    load_section::<detection::ColourBlobConfig>(Some(path), "detection")?;
+    let text = std::fs::read_to_string(path)?;
+    let table: toml::Table = toml::from_str(&text)?;
+    for key in table.keys() {
+        if !["matching", "estimator", "detection"].contains(&key.as_str()) {
+            bail!(
+                "{}: unknown section [{key}] (expected matching, estimator, detection)",
+                path.display()
+            );
+        }
+    }
+    Ok(())
+}
+
+pub fn run(args: &RunArgs) -> Result<()> {
+    if let Some(c) = &args.config {
+        check_config(c)?;
+    }
+    if args.source != "sim" && !Path::new(&args.source).is_dir() {
+        bail!(
+            "--source {}: not a directory (use `sim` or a recording directory)",
+            args.source
+        );
+    }
+    for name in children::SERVICES {
+        children::service_binary(name)?;
+    }
+    let out = &args.out;
+    std::fs::create_dir_all(out).with_context(|| format!("create {}", out.display()))?;
+    let stats_dir = out.join("stats");
+    let stream_dir = out.join("stream");
+    for dir in [&stats_dir, &stream_dir] {
+        if dir.exists() {
+            std::fs::remove_dir_all(dir).with_context(|| format!("clear {}", dir.display()))?;
+        }
+        std::fs::create_dir_all(dir).with_context(|| format!("create {}", dir.display()))?;
+    }
+    let cleaned = clean_dead_nodes();
+    if cleaned > 0 {
+        tracing::info!(cleaned, "removed resources of dead iceoryx2 nodes");
+    }
+    let run_id = new_run_id();
+    let mut common = vec![
+        "--run-id".to_string(),
+        run_id.clone(),
+        "--stats-dir".into(),
+        stats_dir.display().to_string(),
+    ];
+    if let Some(c) = &args.config {
+        common.extend(["--config".into(), c.display().to_string()]);
+    }
+    eprintln!(
+        "dualgeo run {run_id}: source {}, rate {}, output {}",
+        args.source,
+        args.rate,
+        out.display()
+    );
+
+    let collector = collect::Collector::new(&run_id)?;
+    let mut services: Vec<Service> = Vec::new();
+    let started = (|| -> Result<()> {
+        for name in ["geolocation", "matching", "detection"] {
+            services.push(Service::spawn(name, &common, out)?);
+        }
+        collector.wait_connected(
+            &mut services,
+            Duration::from_secs_f64(args.connect_timeout_s),
+        )?;
+        let mut acq = common.clone();
+        acq.extend([
+            "--source".into(),
+            args.source.clone(),
+            "--rate".into(),
+            args.rate.clone(),
+        ]);
+        acq.extend(["--preset".into(), args.preset.clone()]);
+        if let Some(p) = &args.presets {
+            acq.extend(["--presets".into(), p.display().to_string()]);
+        }
+        if let Some(d) = args.duration_s {
+            acq.extend(["--duration-s".into(), d.to_string()]);
+        }
+        if let Some(s) = args.seed {
+            acq.extend(["--seed".into(), s.to_string()]);
+        }
+        if args.looping {
+            acq.push("--loop".into());
+        }
+        acq.extend(["--log-dir".into(), stream_dir.display().to_string()]);
+        services.push(Service::spawn("acquisition", &acq, out)?);
+        Ok(())
+    })();
+    if let Err(e) = started {
+        let failures = children::stop_all(&mut services, Duration::from_secs(5));
+        for f in failures {
+            eprintln!("  {f}");
+        }
+        return Err(e);
+    }
+
+    let outcome = collector.stream(&mut services);
+    let failures = children::stop_all(&mut services, Duration::from_secs(10));
+    let collected = match outcome {
+        Ok(c) => c,
+        Err(e) => {
+            for f in &failures {
+                eprintln!("  {f}");
+            }
+            return Err(e);
+        }
+    };
+    if !failures.is_empty() {
+        bail!("services did not stop cleanly: {}", failures.join("; "));
+    }
+    outputs::write_all(args, out, &stats_dir, &stream_dir, &collected)
+}

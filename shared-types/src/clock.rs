@@ -1,0 +1,36 @@
+//! CLOCK_MONOTONIC in nanoseconds: one clock for every process on the host, so a
+//! capture time stamped by acquisition can be subtracted from "now" in any other stage.
+
+/// Nanoseconds on CLOCK_MONOTONIC.
+pub fn monotonic_ns() -> u64 {
+    let mut ts = libc::timespec {
+        tv_sec: 0,
+        tv_nsec: 0,
+    };
+    // SAFETY: `ts` is a valid, writable timespec; CLOCK_MONOTONIC always exists on Linux.
+    let rc = unsafe { libc::clock_gettime(libc::CLOCK_MONOTONIC, &mut ts) };
+    if rc != 0 {
+        return 0;
+    }
+    ts.tv_sec as u64 * 1_000_000_000 + ts.tv_nsec as u64
+}
+
+/// Microseconds from `earlier_ns` to `later_ns`, 0 if the clock order is reversed.
+pub fn elapsed_us(earlier_ns: u64, later_ns: u64) -> u64 {
+    later_ns.saturating_sub(earlier_ns) / 1000
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn monotonic_and_positive() {
+        let a = monotonic_ns();
+        std::thread::sleep(std::time::Duration::from_millis(2));
+        let b = monotonic_ns();
+        assert!(a > 0 && b > a && b - a >= 2_000_000);
+        assert_eq!(elapsed_us(b, a), 0);
+        assert_eq!(elapsed_us(1_000, 5_000), 4);
+    }
+}

@@ -1,0 +1,209 @@
+//! What every service process does the same way: its command-line arguments from the
+//! supervisor, logging (`RUST_LOG`), its configuration section, the event-driven wait
+//! loop, and counting lost samples from sequence gaps.
+
+use crate::transport::Ipc;
+use iceoryx2::port::listener::Listener;
+use iceoryx2::prelude::*;
+use iceoryx2::waitset::WaitSetRunResult;
+use serde::de::DeserializeOwned;
+use std::path::{Path, PathBuf};
+
+/// Arguments the supervisor passes to every service.
+#[derive(Debug, Clone, clap::Args)]
+pub struct ServiceArgs {
+    /// The run's id: the iceoryx2 service prefix `dualgeo/<run-id>/`.
+    #[arg(long)]
+    pub run_id: String,
+    /// Where to write `<stage>.json` (histograms and counters) on exit.
+    #[arg(long)]
+    pub stats_dir: PathBuf,
+    /// The run's configuration (TOML with sections per stage); defaults if absent.
+    #[arg(long)]
+    pub config: Option<PathBuf>,
+}
+
+#[derive(Debug, thiserror::Error)]
+pub enum ShellError {
+    #[error("{path}: {detail}")]
+    Config { path: PathBuf, detail: String },
+    #[error("iceoryx2 wait: {0}")]
+    Wait(String),
+}
+
+/// Logs to stderr, filtered by `RUST_LOG` (default `info`), each line tagged with the
+/// service name.
+pub fn init_tracing(service: &str) {
+    let filter = tracing_subscriber::EnvFilter::try_from_default_env()
+        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info"));
+    let _ = tracing_subscriber::fmt()
+        .with_env_filter(filter)
+        .with_writer(std::io::stderr)
+        .with_target(false)
+        .try_init();
+    tracing::debug!(service, "logging started");
+    iceoryx2::prelude::set_log_level(LogLevel::Error);
+}
+
+/// Section `section` of the TOML file at `path`, or `T::default()` when there is no
+/// file or no such section. Unknown keys are errors (the types deny them).
+pub fn load_section<T: DeserializeOwned + Default>(
+    path: Option<&Path>,
+    section: &str,
+) -> Result<T, ShellError> {
+    let Some(path) = path else {
+        return Ok(T::default());
+    };
+    let err = |detail: String| ShellError::Config {
+        path: path.to_path_buf(),
+        detail,
+    };
+    let text = std::fs::read_to_string(path).map_err(|e| err(e.to_string()))?;
+    let table: toml::Table = toml::from_str(&text).map_err(|e| err(e.to_string()))?;
+    match table.get(section) {
+        None => Ok(T::default()),
+        Some(value) => value
+            .clone()
+            .try_into()
+            .map_err(|e| err(format!("[{section}]: {e}"))),
+    }
+}
+
+/// Why [`serve`] returned.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Stop {
+    /// SIGINT / SIGTERM (the supervisor's shutdown).
+    Signal,
+    /// The handler asked to stop.
+    Requested,
+}
+
+/// When a stage woke up and since when it had been idle: a message published after
+/// `idle_since_ns` found the stage waiting, so `wake_ns − published_ns` is the pure
+/// transport hop (publish → consumer running). Messages published while the stage was
+/// busy measure queueing instead and are left out of the hop histogram.
+#[derive(Debug, Clone, Copy)]
+pub struct Wake {
+    pub wake_ns: u64,
+    pub idle_since_ns: u64,
+}
+
+impl Wake {
+    /// The hop in µs of a message published at `published_ns`, if the stage was idle.
+    pub fn hop_us(&self, published_ns: u64) -> Option<u64> {
+        (published_ns >= self.idle_since_ns)
+            .then(|| crate::clock::elapsed_us(published_ns, self.wake_ns))
+    }
+}
+
+/// Waits on `listener` in a WaitSet and calls `on_wake` each time it fires (the
+/// listener is drained first). Returns on SIGINT/SIGTERM, when `on_wake` returns
+/// `Ok(false)`, or with its error.
+pub fn serve<E: std::fmt::Display>(
+    listener: &Listener<Ipc>,
+    mut on_wake: impl FnMut(Wake) -> Result<bool, E>,
+) -> Result<Stop, ShellError> {
+    let waitset = WaitSetBuilder::new()
+        .create::<Ipc>()
+        .map_err(|e| ShellError::Wait(format!("{e:?}")))?;
+    let guard = waitset
+        .attach_notification(listener)
+        .map_err(|e| ShellError::Wait(format!("{e:?}")))?;
+    let mut failure: Option<String> = None;
+    let mut requested = false;
+    let mut idle_since_ns = crate::clock::monotonic_ns();
+    let result = waitset.wait_and_process(|id| {
+        if !id.has_event_from(&guard) {
+            return CallbackProgression::Continue;
+        }
+        let wake_ns = crate::clock::monotonic_ns();
+        if let Err(e) = listener.try_wait(|_| {}) {
+            failure = Some(format!("listener: {e:?}"));
+            return CallbackProgression::Stop;
+        }
+        let outcome = on_wake(Wake {
+            wake_ns,
+            idle_since_ns,
+        });
+        idle_since_ns = crate::clock::monotonic_ns();
+        match outcome {
+            Ok(true) => CallbackProgression::Continue,
+            Ok(false) => {
+                requested = true;
+                CallbackProgression::Stop
+            }
+            Err(e) => {
+                failure = Some(e.to_string());
+                CallbackProgression::Stop
+            }
+        }
+    });
+    if let Some(f) = failure {
+        return Err(ShellError::Wait(f));
+    }
+    match result {
+        Ok(WaitSetRunResult::TerminationRequest | WaitSetRunResult::Interrupt) => Ok(Stop::Signal),
+        Ok(_) if requested => Ok(Stop::Requested),
+        Ok(_) => Ok(Stop::Signal),
+        Err(e) => Err(ShellError::Wait(format!("{e:?}"))),
+    }
+}
+
+/// Counts samples lost between consecutive sequence numbers of one stream.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct SeqGaps {
+    last: Option<u64>,
+    pub lost: u64,
+}
+
+impl SeqGaps {
+    /// Notes `seq`; returns how many were skipped since the previous one.
+    pub fn see(&mut self, seq: u64) -> u64 {
+        let gap = match self.last {
+            Some(last) if seq > last + 1 => seq - last - 1,
+            _ => 0,
+        };
+        if self.last.is_none_or(|last| seq > last) {
+            self.last = Some(seq);
+        }
+        self.lost += gap;
+        gap
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn gaps_count_missing_sequence_numbers() {
+        let mut g = SeqGaps::default();
+        assert_eq!(g.see(5), 0);
+        assert_eq!(g.see(6), 0);
+        assert_eq!(g.see(9), 2);
+        assert_eq!(g.see(3), 0); // a restart (loop) is not a loss
+        assert_eq!(g.lost, 2);
+    }
+
+    #[derive(Debug, Default, serde::Deserialize, PartialEq)]
+    #[serde(deny_unknown_fields, default)]
+    struct Section {
+        a: u32,
+    }
+
+    #[test]
+    fn sections_default_and_reject_unknown_keys() {
+        let dir = std::env::temp_dir().join(format!("dualgeo-shell-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("c.toml");
+        std::fs::write(&path, "[x]\na = 3\n[y]\nb = 1\n").unwrap();
+        assert_eq!(load_section::<Section>(Some(&path), "x").unwrap().a, 3);
+        assert_eq!(load_section::<Section>(Some(&path), "z").unwrap().a, 0);
+        assert_eq!(load_section::<Section>(None, "x").unwrap().a, 0);
+        let e = load_section::<Section>(Some(&path), "y")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("c.toml") && e.contains("[y]"), "{e}");
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+}

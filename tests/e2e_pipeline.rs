@@ -1,0 +1,270 @@
+//! End-to-end: `dualgeo run`, the four real service processes over iceoryx2, on a short
+//! simulated recording.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output, Stdio};
+use std::time::{Duration, Instant};
+
+fn dualgeo(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_dualgeo"))
+        .args(args)
+        .output()
+        .expect("spawn dualgeo")
+}
+
+fn text(b: &[u8]) -> String {
+    String::from_utf8_lossy(b).into_owned()
+}
+
+/// A scratch folder removed when dropped, even if the test fails.
+struct Scratch(PathBuf);
+
+impl Scratch {
+    fn new(name: &str) -> Self {
+        let p = std::env::temp_dir().join(format!("dualgeo-e2e-{}-{name}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&p);
+        Self(p)
+    }
+
+    fn join(&self, p: &str) -> PathBuf {
+        self.0.join(p)
+    }
+
+    fn s(&self, p: &str) -> String {
+        self.join(p).display().to_string()
+    }
+}
+
+impl Drop for Scratch {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.0);
+    }
+}
+
+fn json(path: &Path) -> serde_json::Value {
+    let t = std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    serde_json::from_str(&t).unwrap_or_else(|e| panic!("{}: {e}", path.display()))
+}
+
+fn keys(v: &serde_json::Value) -> Vec<String> {
+    let mut k: Vec<String> = v.as_object().expect("object").keys().cloned().collect();
+    k.sort();
+    k
+}
+
+/// Simulates a 6 s Table 1 recording (no navigation noise), streams it through the
+/// pipeline at a low rate, then corrupts one image and streams it again.
+#[test]
+fn pipeline_on_a_recording_and_a_corrupt_image() {
+    let dir = Scratch::new("pipeline");
+    let rec = dir.s("rec");
+    let o = dualgeo(&[
+        "simulate",
+        "--preset",
+        "table1",
+        "--duration-s",
+        "6",
+        "--out",
+        &rec,
+    ]);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+
+    // 1. A clean run at 10 pairs/s: estimates, sane accuracy, nothing dropped.
+    let out = dir.s("out");
+    let o = dualgeo(&["run", "--source", &rec, "--rate", "10", "--out", &out]);
+    let (stdout, stderr) = (text(&o.stdout), text(&o.stderr));
+    assert!(o.status.success(), "{stdout}\n{stderr}");
+    assert!(
+        stdout.contains("latency ms") && stdout.contains("end_to_end"),
+        "{stdout}"
+    );
+    let report = json(&dir.join("out/report.json"));
+    assert_eq!(
+        keys(&report),
+        [
+            "accuracy",
+            "estimates_out",
+            "frames_dropped",
+            "frames_in",
+            "latency_us",
+            "pairs_in",
+            "throughput_hz"
+        ]
+    );
+    assert_eq!(report["frames_in"], 360, "{report}");
+    assert_eq!(report["pairs_in"], 180, "{report}");
+    assert_eq!(report["frames_dropped"], 0, "{report}");
+    let estimates = report["estimates_out"].as_u64().unwrap();
+    assert!(estimates >= 40, "{report}");
+    let acc = &report["accuracy"];
+    assert_eq!(keys(acc), ["mae_m", "max_m", "std_m", "yaw_bias_mae_deg"]);
+    for axis in ["x", "y", "z"] {
+        let mae = acc["mae_m"][axis].as_f64().unwrap();
+        assert!(mae > 0.0 && mae < 1.5, "MAE {axis} = {mae}: {report}");
+    }
+    let lat = &report["latency_us"];
+    assert_eq!(
+        keys(lat),
+        [
+            "detection",
+            "end_to_end",
+            "geolocation",
+            "matching",
+            "transport"
+        ]
+    );
+    for row in [
+        "detection",
+        "end_to_end",
+        "geolocation",
+        "matching",
+        "transport",
+    ] {
+        assert_eq!(keys(&lat[row]), ["max", "p50", "p90", "p99", "p999"]);
+        let (p50, max) = (
+            lat[row]["p50"].as_u64().unwrap(),
+            lat[row]["max"].as_u64().unwrap(),
+        );
+        assert!(p50 > 0 && p50 <= max, "{row}: {}", lat[row]);
+    }
+    assert!(report["throughput_hz"].as_f64().unwrap() > 1.0);
+
+    let track = std::fs::read_to_string(dir.join("out/track.csv")).unwrap();
+    assert!(track.starts_with("t_s,pair_seq,x_m,y_m,z_m,lat_deg,lon_deg,alt_m,yaw_bias_left_deg,yaw_bias_right_deg,images_used,iterations\n"));
+    assert_eq!(track.lines().count() as u64, estimates + 1);
+    let geo = json(&dir.join("out/track.geojson"));
+    let first = &geo["features"][0]["geometry"]["coordinates"][0];
+    // [lon, lat, alt] near the preset's origin (30.2741 N, 120.1551 E).
+    assert!(
+        (first[0].as_f64().unwrap() - 120.155).abs() < 0.01,
+        "{first}"
+    );
+    assert!(
+        (first[1].as_f64().unwrap() - 30.274).abs() < 0.01,
+        "{first}"
+    );
+    for f in [
+        "latency/end_to_end.hgrm",
+        "latency/transport.hgrm",
+        "latency.png",
+        "path.png",
+    ] {
+        assert!(dir.join(&format!("out/{f}")).is_file(), "{f} missing");
+    }
+    let hgrm = std::fs::read_to_string(dir.join("out/latency/end_to_end.hgrm")).unwrap();
+    assert!(
+        hgrm.contains("Percentile") && hgrm.contains("#[Max"),
+        "{hgrm}"
+    );
+
+    // 2. A truncated image: named in the log, its pair skipped, the run goes on.
+    let victim = dir.join("rec/left/000100.png");
+    let bytes = std::fs::read(&victim).unwrap();
+    std::fs::write(&victim, &bytes[..bytes.len() / 2]).unwrap();
+    let out2 = dir.s("out2");
+    let o = dualgeo(&["run", "--source", &rec, "--rate", "max", "--out", &out2]);
+    let (stdout, stderr) = (text(&o.stdout), text(&o.stderr));
+    assert!(o.status.success(), "{stdout}\n{stderr}");
+    assert!(
+        stderr.contains("000100.png") && stderr.contains("truncated"),
+        "{stderr}"
+    );
+    assert!(
+        stdout.contains("1 pair(s) skipped for unreadable images"),
+        "{stdout}"
+    );
+    let report = json(&dir.join("out2/report.json"));
+    assert_eq!(report["pairs_in"], 179, "{report}");
+    let counters = json(&dir.join("out2/counters.json"));
+    assert_eq!(counters["acquisition.bad_frames"], 1, "{counters}");
+}
+
+#[test]
+fn bad_input_at_the_boundary_is_a_clear_error() {
+    let dir = Scratch::new("bad-args");
+    let o = dualgeo(&["run", "--source", &dir.s("nowhere"), "--out", &dir.s("out")]);
+    assert!(!o.status.success());
+    assert!(
+        text(&o.stderr).contains("not a directory"),
+        "{}",
+        text(&o.stderr)
+    );
+
+    std::fs::create_dir_all(&dir.0).unwrap();
+    let config = dir.join("bad.toml");
+    std::fs::write(&config, "[matching]\norb_features = 3\n").unwrap();
+    let o = dualgeo(&[
+        "run",
+        "--config",
+        config.to_str().unwrap(),
+        "--out",
+        &dir.s("out"),
+    ]);
+    assert!(!o.status.success());
+    assert!(
+        text(&o.stderr).contains("[matching]"),
+        "{}",
+        text(&o.stderr)
+    );
+}
+
+/// The children of `pid` whose executable name starts with `name`.
+fn child_named(pid: u32, name: &str) -> Option<u32> {
+    for entry in std::fs::read_dir("/proc").ok()?.flatten() {
+        let Ok(child) = entry.file_name().to_string_lossy().parse::<u32>() else {
+            continue;
+        };
+        let Ok(stat) = std::fs::read_to_string(format!("/proc/{child}/stat")) else {
+            continue;
+        };
+        // pid (comm) state ppid ...
+        let (Some(open), Some(close)) = (stat.find('('), stat.rfind(')')) else {
+            continue;
+        };
+        let comm = &stat[open + 1..close];
+        let ppid = stat[close + 2..].split_whitespace().nth(1);
+        if comm.starts_with(name) && ppid == Some(&pid.to_string()) {
+            return Some(child);
+        }
+    }
+    None
+}
+
+/// A service that dies mid-run ends the run with its name and a non-zero exit, and
+/// the other services are stopped (no process left behind).
+#[test]
+fn a_dying_service_ends_the_run_clearly() {
+    let dir = Scratch::new("dying");
+    let run = Command::new(env!("CARGO_BIN_EXE_dualgeo"))
+        .args(["run", "--loop", "--out", &dir.s("out")])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("spawn dualgeo");
+    let pid = run.id();
+    // Wait until acquisition is up (all four are then running), then kill matching.
+    let deadline = Instant::now() + Duration::from_secs(60);
+    let victim = loop {
+        if let (Some(_), Some(m)) = (
+            child_named(pid, "dualgeo-acquis"),
+            child_named(pid, "dualgeo-matchin"),
+        ) {
+            break m;
+        }
+        assert!(Instant::now() < deadline, "services did not start");
+        std::thread::sleep(Duration::from_millis(100));
+    };
+    std::thread::sleep(Duration::from_millis(1500));
+    // SAFETY: kill(2) on a pid read from /proc just now.
+    unsafe { libc::kill(victim as i32, libc::SIGKILL) };
+    let o = run.wait_with_output().expect("wait for dualgeo");
+    let stderr = text(&o.stderr);
+    assert!(!o.status.success(), "{stderr}");
+    assert!(
+        stderr.contains("matching service ended unexpectedly (signal 9)"),
+        "{stderr}"
+    );
+    for name in ["dualgeo-acquis", "dualgeo-detecti", "dualgeo-geoloca"] {
+        assert!(child_named(pid, name).is_none(), "{name} left running");
+    }
+}
