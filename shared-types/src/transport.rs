@@ -67,6 +67,8 @@ pub const MESSAGE_MAX_SUBSCRIBERS: usize = 3;
 /// A stage that is woken by its producers.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Stage {
+    /// Woken by matching's pair acknowledgements (flow control of `--rate max`).
+    Acquisition,
     Detection,
     Matching,
     Geolocation,
@@ -76,6 +78,7 @@ pub enum Stage {
 impl Stage {
     pub fn name(self) -> &'static str {
         match self {
+            Stage::Acquisition => "acquisition",
             Stage::Detection => "detection",
             Stage::Matching => "matching",
             Stage::Geolocation => "geolocation",

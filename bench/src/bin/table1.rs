@@ -57,6 +57,8 @@ fn main() -> Result<()> {
         },
         ..MatchingConfig::default()
     };
+    // The time split is per step on one thread (CPU time per geolocation).
+    matching.match_threads = 1;
     if let Some(n) = args.orb_features {
         matching.orb_features = n;
     }

@@ -9,9 +9,14 @@
 //! At the end of the stream the supervisor is woken with the end-of-stream event and
 //! the process idles until it is told to stop (SIGTERM), so nothing it sent is lost.
 //!
+//! Pacing: `realtime` follows the recording's (or simulator's) clock and never waits
+//! for anyone; `max` is flow-controlled instead: at most two pairs ahead of matching,
+//! which acknowledges every pair it finishes (or drops) on the `wake/acquisition` event
+//! service. A missing acknowledgement is given up after 1 s (`flow_timeouts`).
+//!
 //! Histograms (µs): `produce` (render or decode of a pair), `pacing_lag` (how late a
 //! pair left against its schedule). Counters: `pairs_in`, `frames_in`, `pairs_dropped`,
-//! `bad_frames`, `loops`.
+//! `bad_frames`, `loops`, `flow_timeouts`.
 
 use acquisition::recording::{
     decode_image_into, Recording, StereoPair, StreamLog, TelemetryRow, TruthRow,
@@ -60,6 +65,9 @@ struct Args {
     #[arg(long)]
     log_dir: Option<PathBuf>,
 }
+
+/// `--rate max`: pairs sent but not yet finished by matching, at most.
+const MAX_IN_FLIGHT: u64 = 2;
 
 #[derive(Debug, Clone, Copy)]
 enum Rate {
@@ -247,6 +255,13 @@ fn main() -> Result<()> {
         endpoint.notifier(Stage::Matching)?,
     ];
     let wake_supervisor = endpoint.notifier(Stage::Supervisor)?;
+    // `--rate max` replays as fast as matching finishes pairs (never more than
+    // MAX_IN_FLIGHT ahead), so no frame is produced only to be dropped.
+    let acks = match rate {
+        Rate::Max => Some(endpoint.listener(Stage::Acquisition)?),
+        _ => None,
+    };
+    let mut acknowledged = 0u64;
     let mut log = match (&source, &args.log_dir) {
         (Source::Sim { .. }, Some(dir)) => Some(StreamLog::create(dir)?),
         _ => None,
@@ -262,6 +277,25 @@ fn main() -> Result<()> {
     let (mut seq, mut t_offset, mut t_first, mut last_t) = (0u64, 0.0f64, None::<f64>, 0.0f64);
     let mut signalled = false;
     'stream: loop {
+        if let Some(listener) = &acks {
+            let mut waited = false;
+            while seq.saturating_sub(acknowledged) >= MAX_IN_FLIGHT {
+                if waited {
+                    // No acknowledgement for a second: matching lost a pair; go on.
+                    stats.count("flow_timeouts", 1);
+                    acknowledged = seq;
+                    break;
+                }
+                listener
+                    .timed_wait(|e| acknowledged += e.count, Duration::from_secs(1))
+                    .map_err(|e| anyhow::anyhow!("acknowledgement listener: {e:?}"))?;
+                waited = seq.saturating_sub(acknowledged) >= MAX_IN_FLIGHT;
+                if endpoint.node.wait(Duration::ZERO).is_err() {
+                    signalled = true;
+                    break 'stream;
+                }
+            }
+        }
         // Loan both samples first: a pair is only produced when both fit.
         let loans = (
             publishers[0].loan_slice(frame_bytes),

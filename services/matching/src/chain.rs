@@ -300,65 +300,69 @@ impl VisionChain {
             observation(uav, &f.pose, detections[uav.index()], f.intrinsics)
         });
 
+        // Every selected past image is independent: split them over
+        // `match_threads` threads, keep their order.
+        let jobs: Vec<(Uav, &Keyframe)> = [Uav::Left, Uav::Right]
+            .into_iter()
+            .flat_map(|uav| selected[uav.index()].iter().map(move |kf| (uav, *kf)))
+            .collect();
+        let metas = [*current[0], *current[1]];
+        let config = &self.config;
+        let run =
+            |chunk: &[(Uav, &Keyframe)]| -> Vec<(Result<PastMatch, MatchReject>, ChainTiming)> {
+                let mut neighbours = Vec::with_capacity(config.orb_features as usize);
+                chunk
+                    .iter()
+                    .map(|(uav, kf)| {
+                        let mut t = ChainTiming::default();
+                        let r = match_past(
+                            config,
+                            *uav,
+                            kf,
+                            &metas,
+                            detections,
+                            features,
+                            &mut neighbours,
+                            &mut t,
+                        );
+                        (r, t)
+                    })
+                    .collect()
+            };
+        let threads = self.config.match_threads.clamp(1, jobs.len().max(1));
+        let per_thread = jobs.len().div_ceil(threads);
+        let results: Vec<(Result<PastMatch, MatchReject>, ChainTiming)> = if threads > 1 {
+            std::thread::scope(|scope| {
+                let handles: Vec<_> = jobs
+                    .chunks(per_thread)
+                    .skip(1)
+                    .map(|chunk| scope.spawn(|| run(chunk)))
+                    .collect();
+                let mut out = run(jobs.chunks(per_thread).next().unwrap_or(&[]));
+                for h in handles {
+                    match h.join() {
+                        Ok(part) => out.extend(part),
+                        Err(panic) => std::panic::resume_unwind(panic),
+                    }
+                }
+                out
+            })
+        } else {
+            run(&jobs)
+        };
+
         let mut past = Vec::new();
         let mut past_obs = Vec::new();
-        let mut neighbours = Vec::with_capacity(self.config.orb_features as usize);
-        for uav in [Uav::Left, Uav::Right] {
-            for kf in &selected[uav.index()] {
-                // F_Ln from the current left image, F_Rn from the current right one.
-                let mut geometry: [Option<PairGeometry>; 2] = [None, None];
-                for side in 0..2 {
-                    let t = Instant::now();
-                    let (a, b) = match_points(
-                        &features[side],
-                        &kf.features,
-                        self.config.ratio_test,
-                        &mut neighbours,
-                    );
-                    timing.matching_us += micros(t);
-                    let t = Instant::now();
-                    let result = estimate_fundamental(
-                        &a,
-                        &b,
-                        (&current[side].intrinsics, &kf.intrinsics),
-                        &self.config,
-                    );
-                    timing.fundamental_us += micros(t);
-                    match result {
-                        Ok(g) => geometry[side] = Some(g),
-                        Err(reason) => {
-                            rejections.push((uav, kf.seq, reason));
-                            break;
-                        }
-                    }
+        for ((uav, kf), (result, t)) in jobs.iter().zip(results) {
+            timing.matching_us += t.matching_us;
+            timing.fundamental_us += t.fundamental_us;
+            timing.transfer_us += t.transfer_us;
+            match result {
+                Ok(m) => {
+                    past_obs.push(observation(*uav, &kf.pose, m.pixel, kf.intrinsics));
+                    past.push(m);
                 }
-                let [Some(gl), Some(gr)] = geometry else {
-                    continue;
-                };
-                let t = Instant::now();
-                let transferred = transfer_point(
-                    &gl.f,
-                    detections[0],
-                    &gr.f,
-                    detections[1],
-                    kf.width,
-                    kf.height,
-                    &self.config,
-                );
-                timing.transfer_us += micros(t);
-                match transferred {
-                    Ok(pixel) => {
-                        past.push(PastMatch {
-                            uav,
-                            seq: kf.seq,
-                            pixel,
-                            inliers: [gl.inliers, gr.inliers],
-                            fundamental: [gl.f, gr.f],
-                        });
-                        past_obs.push(observation(uav, &kf.pose, pixel, kf.intrinsics));
-                    }
-                    Err(reason) => rejections.push((uav, kf.seq, reason)),
-                }
+                Err(reason) => rejections.push((*uav, kf.seq, reason)),
             }
         }
 
@@ -368,4 +372,52 @@ impl VisionChain {
             past,
         })))
     }
+}
+
+/// Eq. (24)–(28) for one past image: F_Ln from the current left image, F_Rn from the
+/// current right one, and the intersection of the two epipolar lines. Adds the step
+/// times to `timing`.
+#[allow(clippy::too_many_arguments)]
+fn match_past(
+    config: &MatchingConfig,
+    uav: Uav,
+    kf: &Keyframe,
+    current: &[FrameMeta; 2],
+    detections: [[f64; 2]; 2],
+    features: &[Arc<Features>; 2],
+    neighbours: &mut Vec<Option<crate::hamming::Nearest2>>,
+    timing: &mut ChainTiming,
+) -> Result<PastMatch, MatchReject> {
+    let mut geometry: [Option<PairGeometry>; 2] = [None, None];
+    for side in 0..2 {
+        let t = Instant::now();
+        let (a, b) = match_points(&features[side], &kf.features, config.ratio_test, neighbours);
+        timing.matching_us += micros(t);
+        let t = Instant::now();
+        let result =
+            estimate_fundamental(&a, &b, (&current[side].intrinsics, &kf.intrinsics), config);
+        timing.fundamental_us += micros(t);
+        geometry[side] = Some(result?);
+    }
+    let [Some(gl), Some(gr)] = geometry else {
+        return Err(MatchReject::FundamentalFailed);
+    };
+    let t = Instant::now();
+    let pixel = transfer_point(
+        &gl.f,
+        detections[0],
+        &gr.f,
+        detections[1],
+        kf.width,
+        kf.height,
+        config,
+    );
+    timing.transfer_us += micros(t);
+    Ok(PastMatch {
+        uav,
+        seq: kf.seq,
+        pixel: pixel?,
+        inliers: [gl.inliers, gr.inliers],
+        fundamental: [gl.f, gr.f],
+    })
 }

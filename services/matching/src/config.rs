@@ -71,6 +71,8 @@ pub struct MatchingConfig {
     pub usac_local_optimisation: UsacLocalOptimisation,
     /// Local-optimisation rounds.
     pub usac_lo_iterations: i32,
+    /// Threads sharing the past images of one geolocation (1 = the calling thread only).
+    pub match_threads: usize,
     /// Fewer inliers than this rejects the past image.
     pub min_inliers: usize,
     /// Epipolar lines of eq. (27) and (28) closer to parallel than this reject it.
@@ -99,6 +101,7 @@ impl Default for MatchingConfig {
             usac_score: UsacScore::Msac,
             usac_local_optimisation: UsacLocalOptimisation::GraphCut,
             usac_lo_iterations: 10,
+            match_threads: 2,
             min_inliers: 30,
             min_line_angle_deg: 5.0,
             border_px: 2.0,
@@ -122,6 +125,7 @@ impl MatchingConfig {
             && self.ransac_confidence < 1.0
             && self.ransac_max_iterations > 0
             && self.usac_lo_iterations >= 0
+            && (1..=64).contains(&self.match_threads)
             && self.min_inliers >= 8
             && self.min_line_angle_deg >= 0.0
             && self.border_px >= 0.0;

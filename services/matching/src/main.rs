@@ -47,6 +47,9 @@ struct Pending {
 }
 
 struct Matcher {
+    /// Left frames finished with (processed, dropped or lost), not yet acknowledged to
+    /// acquisition: one acknowledgement per pair, for `--rate max` flow control.
+    acks: u64,
     chain: VisionChain,
     worker_orb: OrbExtractor,
     pending: BTreeMap<u64, Pending>,
@@ -175,8 +178,10 @@ impl Matcher {
         let cutoff = complete.unwrap_or(newest.saturating_sub(MAX_PENDING_PAIRS));
         let stale: Vec<u64> = self.pending.range(..cutoff).map(|(s, _)| *s).collect();
         for s in stale {
-            self.pending.remove(&s);
-            self.stats.count("pairs_abandoned", 1);
+            if let Some(p) = self.pending.remove(&s) {
+                self.stats.count("pairs_abandoned", 1);
+                self.acks += p.frames[0].is_some() as u64;
+            }
         }
         let Some(seq) = complete else { return Ok(None) };
         let Some(pair) = self.pending.remove(&seq) else {
@@ -191,6 +196,7 @@ impl Matcher {
             return Ok(None);
         };
         self.stats.count("pairs", 1);
+        self.acks += 1;
         let start = monotonic_ns();
         let (ml, mr) = (meta(&hl, &dl), meta(&hr, &dr));
         let features = [fl, fr];
@@ -254,6 +260,7 @@ fn main() -> Result<()> {
         config.subpixel_keypoints,
     )?;
     let mut matcher = Matcher {
+        acks: 0,
         chain: VisionChain::new(config, estimator)?,
         worker_orb,
         pending: BTreeMap::new(),
@@ -268,6 +275,7 @@ fn main() -> Result<()> {
     let detections = endpoint.subscriber::<DetectionMsg>(Topic::Detections)?;
     let publisher = endpoint.publisher::<ObservationSetMsg>(Topic::Observations)?;
     let wake_geolocation = endpoint.notifier(Stage::Geolocation)?;
+    let ack_acquisition = endpoint.notifier(Stage::Acquisition)?;
     let listener = endpoint.listener(Stage::Matching)?;
     tracing::info!(run = endpoint.run_id(), "matching ready");
     let mut next_set_seq = 0u64;
@@ -282,6 +290,9 @@ fn main() -> Result<()> {
             publisher.send_copy(set).context("publish observations")?;
             wake_geolocation.notify().context("wake geolocation")?;
             matcher.stats.count("sets", 1);
+        }
+        for _ in 0..std::mem::take(&mut matcher.acks) {
+            ack_acquisition.notify().context("acknowledge a pair")?;
         }
         Ok(true)
     })?;
