@@ -3,10 +3,13 @@
 //! - `run`: the main job: the four service processes over iceoryx2 (see `pipeline`).
 //! - `simulate`: renders a scenario preset into a recording.
 //! - `validate`: checks a recording completely.
+//! - `evaluate`: the paper's evaluation on the simulator (docs/evaluation.md).
 //! - `synthetic`: the estimator alone on exact synthetic rays with the paper's
 //!   navigation noise, beside the one-shot baseline.
 
+mod evaluate;
 mod pipeline;
+mod plot_font;
 mod simulate;
 mod synthetic_job;
 mod validate;
@@ -31,6 +34,9 @@ enum Command {
     /// Run the pipeline (four processes over shared memory) on the live simulator or a
     /// recording; prints the latency table and accuracy, writes track, report and plots.
     Run(pipeline::RunArgs),
+    /// The paper's experiments (Tables 1–4, Figures 8–12) on the simulator, beside the
+    /// paper's numbers; writes docs/evaluation.md and its plots.
+    Evaluate(evaluate::EvaluateArgs),
     /// The estimator alone on exact synthetic rays (Monte Carlo), beside one-shot.
     Synthetic(synthetic_job::RunArgs),
     /// Render a simulator preset into a recording.
@@ -49,6 +55,7 @@ fn main() -> Result<()> {
     match Cli::parse().command {
         Command::Run(args) => pipeline::run(&args),
         Command::Synthetic(args) => synthetic_job::run(&args),
+        Command::Evaluate(args) => evaluate::run(&args),
         Command::Simulate(args) => simulate::run(&args),
         Command::Validate(args) => validate::run(&args),
     }

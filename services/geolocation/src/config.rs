@@ -81,6 +81,18 @@ impl Default for NoiseModel {
     }
 }
 
+/// Which estimator runs after the consistency filter.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum EstimatorMethod {
+    /// The paper's alternation of altitude (eq. 16–23) and regression (eq. 12–15).
+    #[default]
+    Paper,
+    /// The paper's estimate refined by one joint weighted least squares over
+    /// (x, y, z, δψ_L, δψ_R) on every kept ray (`joint.rs`).
+    Joint,
+}
+
 /// Everything the paper's per-window estimator can be tuned with.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
@@ -98,6 +110,13 @@ pub struct EstimatorConfig {
     /// The paper gives no value; 3° separates a wrong correspondence from right ones
     /// on noise-free data (see the consistency tests) while tolerating matching noise.
     pub consistency_threshold_deg: f64,
+    /// The estimator after the consistency filter.
+    pub method: EstimatorMethod,
+    /// Huber corner of the joint estimator, on each image's whitened residual norm
+    /// (0 = plain least squares).
+    pub joint_huber_k: f64,
+    /// σ of the joint estimator's zero-mean prior on each yaw bias, degrees (0 = none).
+    pub joint_bias_prior_deg: f64,
 }
 
 impl Default for EstimatorConfig {
@@ -109,6 +128,9 @@ impl Default for EstimatorConfig {
             max_iterations: 20,
             min_ray_angle_deg: 1.0,
             consistency_threshold_deg: 3.0,
+            method: EstimatorMethod::Paper,
+            joint_huber_k: 2.0,
+            joint_bias_prior_deg: 30.0,
         }
     }
 }
@@ -137,6 +159,8 @@ impl EstimatorConfig {
         positive(self.bias_tolerance_deg, "bias_tolerance_deg")?;
         positive(self.min_ray_angle_deg, "min_ray_angle_deg")?;
         positive(self.consistency_threshold_deg, "consistency_threshold_deg")?;
+        positive(self.joint_huber_k, "joint_huber_k")?;
+        positive(self.joint_bias_prior_deg, "joint_bias_prior_deg")?;
         if self.max_iterations == 0 {
             return Err(EstimatorError::Config(
                 "max_iterations must be at least 1".into(),

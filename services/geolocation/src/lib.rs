@@ -23,14 +23,16 @@ pub mod error;
 pub mod evaluation;
 pub mod ground_model;
 pub mod iteration;
+pub mod joint;
 pub mod observation;
 pub mod one_shot;
 pub mod regression;
 pub mod synthetic;
 
-pub use config::{EstimatorConfig, NoiseModel};
+pub use config::{EstimatorConfig, EstimatorMethod, NoiseModel};
 pub use consistency::{
-    consistency_filter, geolocate_filtered, ConsistencyOutcome, FilteredEstimate,
+    consistency_filter, geolocate_configured, geolocate_filtered, ConsistencyOutcome,
+    FilteredEstimate,
 };
 pub use error::EstimatorError;
 pub use iteration::{geolocate, Estimate};

@@ -1,6 +1,7 @@
 //! `dualgeo-geolocation`: the geolocation service shell. Wakes when matching publishes
 //! an observation set, runs the paper's consistency filter (eq. 29–32) and the
-//! altitude/regression iteration, and publishes an [`EstimateMsg`].
+//! altitude/regression iteration (or the joint estimator, `[estimator] method`), and
+//! publishes an [`EstimateMsg`].
 //!
 //! Histograms (µs): `transport`, `wait`, `compute`, and `end_to_end` (frame capture →
 //! estimate published). Counters: `sets`, `estimates`, `sets_lost`, `bad_input`,
@@ -8,7 +9,7 @@
 
 use anyhow::{Context, Result};
 use clap::Parser;
-use geolocation::{geolocate_filtered, EstimatorConfig, Observation};
+use geolocation::{geolocate_configured, EstimatorConfig, Observation};
 use shared_types::clock::{elapsed_us, monotonic_ns};
 use shared_types::messages::{EstimateMsg, EstimateStatus, ObservationSetMsg};
 use shared_types::service_names::Topic;
@@ -60,7 +61,7 @@ fn estimate(
             return msg;
         }
     };
-    match geolocate_filtered(
+    match geolocate_configured(
         &observations[0],
         &observations[1],
         &observations[2..],

@@ -15,7 +15,7 @@ mod children;
 mod collect;
 mod latency;
 mod outputs;
-mod plots;
+pub(crate) mod plots;
 
 use anyhow::{bail, Context, Result};
 use children::Service;

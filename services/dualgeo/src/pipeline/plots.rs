@@ -5,35 +5,13 @@
 //! Text is drawn with DejaVu Sans, read at run time from Debian's `fonts-dejavu-core`
 //! (installed by scripts/setup.sh). Without it the plots are still drawn, without text.
 
+use crate::plot_font::font_available;
 use anyhow::{anyhow, Result};
 use hdrhistogram::Histogram;
 use plotters::prelude::*;
 use std::path::Path;
-use std::sync::OnceLock;
 
-const FONT_PATHS: [&str; 2] = [
-    "/usr/share/fonts/truetype/dejavu/DejaVuSans.ttf",
-    "/usr/share/fonts/dejavu/DejaVuSans.ttf",
-];
-
-/// Registers the font once; false when none is installed.
-fn font_available() -> bool {
-    static FONT: OnceLock<bool> = OnceLock::new();
-    *FONT.get_or_init(|| {
-        for path in FONT_PATHS {
-            if let Ok(bytes) = std::fs::read(path) {
-                let bytes: &'static [u8] = Box::leak(bytes.into_boxed_slice());
-                if plotters::style::register_font("sans-serif", FontStyle::Normal, bytes).is_ok() {
-                    return true;
-                }
-            }
-        }
-        tracing::warn!("no DejaVu Sans font found: plots are drawn without text (apt-get install fonts-dejavu-core)");
-        false
-    })
-}
-
-const COLOURS: [RGBColor; 5] = [
+pub const COLOURS: [RGBColor; 5] = [
     RGBColor(31, 119, 180),
     RGBColor(255, 127, 14),
     RGBColor(44, 160, 44),
@@ -149,7 +127,9 @@ pub fn path_against_truth(path: &Path, estimated: &[[f64; 2]], truth: &[[f64; 2]
         )
         .map_err(err)?;
     let mut mesh = chart.configure_mesh();
-    mesh.x_desc("east (m)").y_desc("north (m)");
+    mesh.x_desc("east (m)")
+        .y_desc("north (m)")
+        .light_line_style(WHITE);
     if !text {
         mesh.x_labels(0).y_labels(0);
     }
