@@ -131,11 +131,14 @@ pub struct DetectionMsg {
 /// One image of an observation set: the measured pose and the target's pixel.
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
 #[repr(C)]
-#[type_name("dualgeo::ObservationEntry/v1")]
+#[type_name("dualgeo::ObservationEntry/v2")]
 pub struct ObservationEntry {
     /// 0 = left, 1 = right.
     pub uav: u8,
     pub _reserved: [u8; 7],
+    /// The image's frame sequence number (with `uav`, its identity across sets: the
+    /// temporal estimator recognises a reused keyframe by it).
+    pub frame_seq: u64,
     pub pose: PoseSample,
     /// (u, v), pixels: the detection (current images) or the epipolar transfer (past).
     pub pixel: [f64; 2],
@@ -150,7 +153,7 @@ pub const MAX_OBSERVATIONS: usize = 32;
 /// `entries[1]` the current right one, then `count − 2` past images.
 #[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
 #[repr(C)]
-#[type_name("dualgeo::ObservationSetMsg/v2")]
+#[type_name("dualgeo::ObservationSetMsg/v3")]
 pub struct ObservationSetMsg {
     /// Index of this set among the sets matching published (gaps = sets lost).
     pub set_seq: u64,
@@ -246,10 +249,10 @@ mod tests {
     #[test]
     fn message_sizes_are_fixed() {
         assert_eq!(std::mem::size_of::<DetectionMsg>(), 96);
-        assert_eq!(std::mem::size_of::<ObservationEntry>(), 104);
+        assert_eq!(std::mem::size_of::<ObservationEntry>(), 112);
         assert_eq!(
             std::mem::size_of::<ObservationSetMsg>(),
-            48 + 104 * MAX_OBSERVATIONS
+            48 + 112 * MAX_OBSERVATIONS
         );
         let set = ObservationSetMsg {
             count: 99,

@@ -91,6 +91,9 @@ pub enum EstimatorMethod {
     /// The paper's estimate refined by one joint weighted least squares over
     /// (x, y, z, δψ_L, δψ_R) on every kept ray (`joint.rs`).
     Joint,
+    /// The biases and the target carried across geolocations (`temporal.rs`): a
+    /// stateful filter fed by the paper's per-window estimate of each set.
+    Temporal,
 }
 
 /// Everything the paper's per-window estimator can be tuned with.
@@ -117,6 +120,8 @@ pub struct EstimatorConfig {
     pub joint_huber_k: f64,
     /// σ of the joint estimator's zero-mean prior on each yaw bias, degrees (0 = none).
     pub joint_bias_prior_deg: f64,
+    /// The temporal filter's tuning (`method = "temporal"`).
+    pub temporal: crate::temporal::TemporalConfig,
 }
 
 impl Default for EstimatorConfig {
@@ -131,6 +136,7 @@ impl Default for EstimatorConfig {
             method: EstimatorMethod::Paper,
             joint_huber_k: 2.0,
             joint_bias_prior_deg: 30.0,
+            temporal: crate::temporal::TemporalConfig::default(),
         }
     }
 }

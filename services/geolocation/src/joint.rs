@@ -18,10 +18,10 @@ use crate::{Estimate, EstimatorConfig, EstimatorError, Observation};
 use nalgebra::{Matrix2, Matrix4, Matrix5, Point3, SMatrix, Vector2, Vector5};
 use shared_types::conventions::{camera_to_world, Attitude};
 
-type Theta = Vector5<f64>;
+pub(crate) type Theta = Vector5<f64>;
 
 /// Reprojection of P into the image of `obs`, with the yaw corrected by `bias`.
-fn reproject(
+pub(crate) fn reproject(
     obs: &Observation,
     position: [f64; 3],
     attitude: Attitude,
@@ -32,7 +32,7 @@ fn reproject(
     obs.intrinsics.project(c.transpose() * d)
 }
 
-fn residual(obs: &Observation, theta: &Theta) -> Option<Vector2<f64>> {
+pub(crate) fn residual(obs: &Observation, theta: &Theta) -> Option<Vector2<f64>> {
     let bias = theta[3 + obs.uav.index()];
     let att = obs.attitude.corrected_for_yaw_bias(bias);
     let p = Point3::new(theta[0], theta[1], theta[2]);
@@ -41,7 +41,7 @@ fn residual(obs: &Observation, theta: &Theta) -> Option<Vector2<f64>> {
 }
 
 /// C_k: the pixel covariance of image k's residual from its pose noise and σ_px.
-fn residual_covariance(
+pub(crate) fn residual_covariance(
     obs: &Observation,
     theta: &Theta,
     config: &EstimatorConfig,
@@ -245,7 +245,11 @@ mod tests {
             trial.target + nalgebra::Vector3::new(8.0, -6.0, 5.0),
             [0.0, 0.0],
         );
-        let e = geolocate_joint(&trial.observations, start, &EstimatorConfig::default()).unwrap();
+        let exact = EstimatorConfig {
+            joint_bias_prior_deg: 0.0,
+            ..EstimatorConfig::default()
+        };
+        let e = geolocate_joint(&trial.observations, start, &exact).unwrap();
         assert!(
             (e.position - trial.target).norm() < 1e-3,
             "{:?} vs {:?}",
@@ -255,6 +259,10 @@ mod tests {
         assert!((e.yaw_bias[0] - trial.yaw_bias[0]).abs() < 1e-5);
         assert!((e.yaw_bias[1] - trial.yaw_bias[1]).abs() < 1e-5);
         assert!(e.converged);
+        // With the default 30° bias prior the estimate is pulled, not lost.
+        let pulled =
+            geolocate_joint(&trial.observations, start, &EstimatorConfig::default()).unwrap();
+        assert!((pulled.position - trial.target).norm() < 2.0);
     }
 
     #[test]

@@ -28,6 +28,7 @@ pub mod observation;
 pub mod one_shot;
 pub mod regression;
 pub mod synthetic;
+pub mod temporal;
 
 pub use config::{EstimatorConfig, EstimatorMethod, NoiseModel};
 pub use consistency::{
@@ -38,3 +39,4 @@ pub use error::EstimatorError;
 pub use iteration::{geolocate, Estimate};
 pub use observation::Observation;
 pub use one_shot::one_shot;
+pub use temporal::{ImageId, TemporalEstimate, TemporalEstimator};

@@ -1,7 +1,9 @@
 //! `dualgeo-geolocation`: the geolocation service shell. Wakes when matching publishes
 //! an observation set, runs the paper's consistency filter (eq. 29–32) and the
-//! altitude/regression iteration (or the joint estimator, `[estimator] method`), and
-//! publishes an [`EstimateMsg`].
+//! altitude/regression iteration, and publishes an [`EstimateMsg`]. `[estimator] method`
+//! selects `paper` (default), `joint`, or `temporal`: the temporal filter carries both
+//! biases and the target across sets (it recognises reused keyframes by their frame
+//! sequence numbers).
 //!
 //! Histograms (µs): `transport`, `wait`, `compute`, and `end_to_end` (frame capture →
 //! estimate published). Counters: `sets`, `estimates`, `sets_lost`, `bad_input`,
@@ -9,7 +11,9 @@
 
 use anyhow::{Context, Result};
 use clap::Parser;
-use geolocation::{geolocate_configured, EstimatorConfig, Observation};
+use geolocation::{
+    geolocate_configured, EstimatorConfig, EstimatorMethod, ImageId, Observation, TemporalEstimator,
+};
 use shared_types::clock::{elapsed_us, monotonic_ns};
 use shared_types::messages::{EstimateMsg, EstimateStatus, ObservationSetMsg};
 use shared_types::service_names::Topic;
@@ -28,6 +32,7 @@ struct Args {
 fn estimate(
     set: &ObservationSetMsg,
     config: &EstimatorConfig,
+    temporal: Option<&mut TemporalEstimator>,
     stats: &mut StageStats,
 ) -> EstimateMsg {
     let mut msg = EstimateMsg {
@@ -61,14 +66,39 @@ fn estimate(
             return msg;
         }
     };
-    match geolocate_configured(
+    let window = geolocate_configured(
         &observations[0],
         &observations[1],
         &observations[2..],
         config,
-    ) {
-        Ok(f) => {
-            let e = f.estimate;
+    );
+    // The temporal filter: fed every set in time order, started from the window estimate.
+    let result = match temporal {
+        None => window.map(|f| f.estimate),
+        Some(filter) => {
+            let past: Vec<(ImageId, Observation)> = set.entries()[2..]
+                .iter()
+                .zip(&observations[2..])
+                .map(|(entry, o)| ((o.uav, entry.frame_seq), *o))
+                .collect();
+            let start = window.as_ref().ok().map(|f| &f.estimate);
+            filter
+                .update(set.t_s, [&observations[0], &observations[1]], &past, start)
+                .map(|t| {
+                    if t.reopened {
+                        stats.count("temporal_reopened", 1);
+                        tracing::info!(
+                            pair = set.pair_seq,
+                            "bias step suspected: covariance re-opened"
+                        );
+                    }
+                    stats.count("temporal_rays_rejected", t.rays_rejected as u64);
+                    t.estimate
+                })
+        }
+    };
+    match result {
+        Ok(e) => {
             stats.count("estimates", 1);
             msg.position = [e.position.x, e.position.y, e.position.z];
             msg.yaw_bias_deg = [e.yaw_bias[0].to_degrees(), e.yaw_bias[1].to_degrees()];
@@ -101,7 +131,11 @@ fn main() -> Result<()> {
     let listener = endpoint.listener(Stage::Geolocation)?;
     let mut stats = StageStats::new("geolocation");
     let mut gaps = SeqGaps::default();
-    tracing::info!(run = endpoint.run_id(), "geolocation ready");
+    let mut temporal = match config.method {
+        EstimatorMethod::Temporal => Some(TemporalEstimator::new(config)?),
+        _ => None,
+    };
+    tracing::info!(run = endpoint.run_id(), method = ?config.method, "geolocation ready");
 
     let stop = serve(&listener, |wake| -> Result<bool> {
         let mut first = true;
@@ -117,7 +151,7 @@ fn main() -> Result<()> {
             stats.record("wait", elapsed_us(set.published_ns, start));
             stats.count("sets", 1);
             stats.count("sets_lost", gaps.see(set.set_seq));
-            let mut msg = estimate(set, &config, &mut stats);
+            let mut msg = estimate(set, &config, temporal.as_mut(), &mut stats);
             drop(sample);
             let done = monotonic_ns();
             stats.record("compute", elapsed_us(start, done));

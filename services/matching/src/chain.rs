@@ -180,6 +180,9 @@ pub struct VisionChain {
     estimator: EstimatorConfig,
     orb: OrbExtractor,
     rings: [KeyframeRing; 2],
+    /// Each UAV's measured position smoothed over time, (t, position): the baseline
+    /// constraint's ruler.
+    smoothed: [Option<(f64, nalgebra::Point3<f64>)>; 2],
 }
 
 fn micros(since: Instant) -> f64 {
@@ -200,6 +203,7 @@ impl VisionChain {
                 config.subpixel_keypoints,
             )?,
             rings: [ring(), ring()],
+            smoothed: [None, None],
             config,
             estimator,
         })
@@ -246,14 +250,42 @@ impl VisionChain {
         })
     }
 
+    /// Updates each UAV's smoothed position with the current pair. GPS noise (σ 3 m per
+    /// axis) would otherwise decide which frames count as T_re apart: the difference of
+    /// two raw fixes has σ ≈ 4 m per axis against T_re = 8 m. An exponential average
+    /// with time constant `baseline_smoothing_s` cuts that to ~1 m. Its lag is the same
+    /// for every frame, so distances between smoothed positions stay right.
+    fn track(&mut self, frames: [&FrameMeta; 2]) {
+        let tau = self.config.baseline_smoothing_s;
+        for uav in [Uav::Left, Uav::Right] {
+            let f = frames[uav.index()];
+            let p = f.pose.position();
+            let slot = &mut self.smoothed[uav.index()];
+            *slot = Some(match *slot {
+                Some((t0, s)) if f.t_s > t0 && tau > 0.0 => {
+                    let a = 1.0 - (-(f.t_s - t0) / tau).exp();
+                    (f.t_s, s + (p - s) * a)
+                }
+                Some((t0, s)) if f.t_s <= t0 && f.t_s > t0 - 1.0 => (t0, s),
+                _ => (f.t_s, p),
+            });
+        }
+    }
+
+    fn baseline_position(&self, uav: Uav, frame: &FrameMeta) -> nalgebra::Point3<f64> {
+        self.smoothed[uav.index()].map_or(frame.pose.position(), |(_, p)| p)
+    }
+
     /// Offers the current pair to the keyframe rings (the baseline constraint decides).
     pub fn admit(&mut self, frames: [&FrameMeta; 2], features: &[Arc<Features>; 2]) {
         for uav in [Uav::Left, Uav::Right] {
             let frame = frames[uav.index()];
+            let baseline_position = self.baseline_position(uav, frame);
             self.rings[uav.index()].offer(Keyframe {
                 seq: frame.seq,
                 t_s: frame.t_s,
                 pose: frame.pose,
+                baseline_position,
                 intrinsics: frame.intrinsics,
                 width: frame.width,
                 height: frame.height,
@@ -266,12 +298,13 @@ impl VisionChain {
     /// in each selected past image. Adds the matching, F/E and transfer times to
     /// `timing` and every rejected past image to `rejections`.
     pub fn match_current(
-        &self,
+        &mut self,
         current: [&FrameMeta; 2],
         features: &[Arc<Features>; 2],
         timing: &mut ChainTiming,
         rejections: &mut Vec<(Uav, u64, MatchReject)>,
     ) -> Result<MatchOutcome, ChainError> {
+        self.track(current);
         let (Some(pl), Some(pr)) = (current[0].detection, current[1].detection) else {
             return Ok(MatchOutcome::NoDetection);
         };
@@ -279,7 +312,7 @@ impl VisionChain {
         let wanted = self.config.images_per_uav - 1;
         let selected: [Vec<&Keyframe>; 2] = [Uav::Left, Uav::Right].map(|uav| {
             let frame = current[uav.index()];
-            self.rings[uav.index()].select(&frame.pose, frame.seq, wanted)
+            self.rings[uav.index()].select(&self.baseline_position(uav, frame), frame.seq, wanted)
         });
         if selected.iter().any(|s| s.len() < wanted) {
             return Ok(MatchOutcome::NotEnoughHistory {

@@ -49,6 +49,9 @@ pub struct MatchingConfig {
     pub images_per_uav: usize,
     /// T_re of the baseline constraint, metres between consecutive selected images.
     pub keyframe_spacing_m: f64,
+    /// Time constant smoothing the measured positions the baseline constraint is
+    /// measured with, seconds (0 = raw GPS).
+    pub baseline_smoothing_s: f64,
     /// Keyframes kept per UAV.
     pub ring_capacity: usize,
     /// ORB features per frame.
@@ -86,6 +89,7 @@ impl Default for MatchingConfig {
         Self {
             images_per_uav: 4,
             keyframe_spacing_m: 8.0,
+            baseline_smoothing_s: 0.5,
             ring_capacity: 16,
             orb_features: 500,
             orb_levels: 3,
@@ -116,6 +120,8 @@ impl MatchingConfig {
         }
         let ok = self.keyframe_spacing_m.is_finite()
             && self.keyframe_spacing_m >= 0.0
+            && self.baseline_smoothing_s.is_finite()
+            && self.baseline_smoothing_s >= 0.0
             && self.orb_features >= 8
             && (1..=16).contains(&self.orb_levels)
             && self.ratio_test > 0.0

@@ -226,9 +226,13 @@ impl Matcher {
                     rejected_past: rejections.len() as u32,
                     ..Default::default()
                 };
-                let all = m.current.iter().chain(&m.past_observations);
-                for (slot, o) in msg.entries.iter_mut().zip(all).take(MAX_OBSERVATIONS) {
+                let seqs = [hl.seq, hr.seq]
+                    .into_iter()
+                    .chain(m.past.iter().map(|p| p.seq));
+                let all = m.current.iter().chain(&m.past_observations).zip(seqs);
+                for (slot, (o, seq)) in msg.entries.iter_mut().zip(all).take(MAX_OBSERVATIONS) {
                     *slot = o.to_entry();
+                    slot.frame_seq = seq;
                     msg.count += 1;
                 }
                 Some(msg)

@@ -2,6 +2,7 @@
 //! moved at least T_re since the last admitted frame), evicted oldest first at capacity.
 
 use crate::features::Features;
+use nalgebra::Point3;
 use shared_types::conventions::Intrinsics;
 use shared_types::messages::PoseSample;
 use std::collections::VecDeque;
@@ -14,14 +15,18 @@ pub struct Keyframe {
     pub t_s: f64,
     /// Measured pose (GPS + AHRS), as the estimator will use it.
     pub pose: PoseSample,
+    /// Where the baseline constraint measures this frame from: the UAV's measured
+    /// positions smoothed over time (`VisionChain`), so GPS noise does not decide which
+    /// frames are T_re apart.
+    pub baseline_position: Point3<f64>,
     pub intrinsics: Intrinsics,
     pub width: u32,
     pub height: u32,
     pub features: Arc<Features>,
 }
 
-fn distance(a: &PoseSample, b: &PoseSample) -> f64 {
-    (a.position() - b.position()).norm()
+fn distance(a: &Point3<f64>, b: &Point3<f64>) -> f64 {
+    (a - b).norm()
 }
 
 #[derive(Debug)]
@@ -44,7 +49,7 @@ impl KeyframeRing {
     /// admitted frame; evicts the oldest when full. Returns whether it was admitted.
     pub fn offer(&mut self, frame: Keyframe) -> bool {
         if let Some(last) = self.frames.back() {
-            if distance(&last.pose, &frame.pose) < self.spacing_m {
+            if distance(&last.baseline_position, &frame.baseline_position) < self.spacing_m {
                 return false;
             }
         }
@@ -58,17 +63,17 @@ impl KeyframeRing {
     /// Up to `count` past keyframes for a geolocation at `current`, newest first, each at
     /// least T_re from the one chosen before it (the first from `current`): the baseline
     /// constraint between adjacent images of Section 2.2.
-    pub fn select(&self, current: &PoseSample, current_seq: u64, count: usize) -> Vec<&Keyframe> {
+    pub fn select(&self, current: &Point3<f64>, current_seq: u64, count: usize) -> Vec<&Keyframe> {
         let mut chosen: Vec<&Keyframe> = Vec::with_capacity(count);
         let mut from = *current;
         for kf in self.frames.iter().rev() {
             if chosen.len() == count {
                 break;
             }
-            if kf.seq >= current_seq || distance(&from, &kf.pose) < self.spacing_m {
+            if kf.seq >= current_seq || distance(&from, &kf.baseline_position) < self.spacing_m {
                 continue;
             }
-            from = kf.pose;
+            from = kf.baseline_position;
             chosen.push(kf);
         }
         chosen
@@ -99,6 +104,7 @@ mod tests {
                 x_m: x,
                 ..Default::default()
             },
+            baseline_position: Point3::new(x, 0.0, 0.0),
             intrinsics: Intrinsics::new(500.0, 500.0, 320.0, 240.0),
             width: 640,
             height: 480,
@@ -128,23 +134,13 @@ mod tests {
         for (seq, x) in [(0, 0.0), (1, 2.0), (2, 4.5), (3, 7.0), (4, 9.0), (5, 11.0)] {
             assert!(ring.offer(kf(seq, x)));
         }
-        let current = PoseSample {
-            x_m: 12.0,
-            ..Default::default()
-        };
+        let current = Point3::new(12.0, 0.0, 0.0);
         // From x = 12: 11 is too close; 9 (3 m) ok; 7 (2 m from 9) ok; 4.5 ok.
         let picked: Vec<u64> = ring.select(&current, 6, 3).iter().map(|k| k.seq).collect();
         assert_eq!(picked, vec![4, 3, 2]);
         // The current frame itself (same seq) is never its own past image.
         assert!(ring
-            .select(
-                &PoseSample {
-                    x_m: 20.0,
-                    ..Default::default()
-                },
-                5,
-                1
-            )
+            .select(&Point3::new(20.0, 0.0, 0.0), 5, 1)
             .iter()
             .all(|k| k.seq < 5));
     }

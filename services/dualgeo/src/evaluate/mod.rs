@@ -102,6 +102,12 @@ pub const SWEEPS: [Sweep; 4] = [
     ),
 ];
 
+/// The bias-step scenario: Table 2's protocol plus a +15° step of the left UAV's bias at
+/// t = 20 s (an AHRS re-initialisation).
+pub const STEP_SCENARIO: &str = "bias_step";
+pub const STEP_AT_S: f64 = 20.0;
+pub const STEP_DEG: f64 = 15.0;
+
 pub fn run(args: &EvaluateArgs) -> Result<()> {
     let started = Instant::now();
     let every = args.every.unwrap_or(if args.quick { 10 } else { 2 }).max(1);
@@ -117,6 +123,7 @@ pub fn run(args: &EvaluateArgs) -> Result<()> {
 
     let presets = Presets::builtin();
     let mut jobs: Vec<(String, usize)> = Vec::new();
+    jobs.push((STEP_SCENARIO.into(), 4));
     for n in [2usize, 4] {
         jobs.push(("table2".into(), n));
         for (_, _, _, levels) in SWEEPS {
@@ -127,7 +134,16 @@ pub fn run(args: &EvaluateArgs) -> Result<()> {
     }
     let configs = jobs
         .iter()
-        .map(|(name, _)| presets.get(name).with_context(|| format!("preset {name}")))
+        .map(|(name, _)| {
+            let preset = if name == STEP_SCENARIO {
+                "table2"
+            } else {
+                name.as_str()
+            };
+            presets
+                .get(preset)
+                .with_context(|| format!("preset {preset}"))
+        })
         .collect::<Result<Vec<_>>>()?;
     let results: Mutex<BTreeMap<(String, usize), ScenarioResult>> = Mutex::new(BTreeMap::new());
     let next = AtomicUsize::new(0);
@@ -144,7 +160,11 @@ pub fn run(args: &EvaluateArgs) -> Result<()> {
                 let i = next.fetch_add(1, Ordering::Relaxed);
                 let Some((name, n)) = jobs.get(i) else { break };
                 let records = pass.records.get(n).map(Vec::as_slice).unwrap_or(&[]);
-                let r = noise::run(&configs[i], records, name == "table2");
+                let step = (name == STEP_SCENARIO).then_some(noise::BiasStep {
+                    at_s: STEP_AT_S,
+                    step_deg: [STEP_DEG, 0.0],
+                });
+                let r = noise::run(&configs[i], records, name == "table2", step);
                 if let Ok(mut map) = results.lock() {
                     map.insert((name.clone(), *n), r);
                 }

@@ -12,8 +12,8 @@ use super::vision::{ImageRef, Record};
 use acquisition::sim::SimConfig;
 use geolocation::evaluation::ErrorStats;
 use geolocation::{
-    geolocate_configured, geolocate_filtered, one_shot, EstimatorConfig, EstimatorMethod,
-    NoiseModel, Observation,
+    geolocate_configured, geolocate_filtered, one_shot, EstimatorConfig, EstimatorMethod, ImageId,
+    NoiseModel, Observation, TemporalEstimator,
 };
 use nalgebra::Vector2;
 use rand::SeedableRng;
@@ -65,19 +65,81 @@ impl MethodErrors {
     }
 }
 
+/// Calibration of a method's stated 1σ: how often the true error is inside 1σ and 2σ.
+/// Horizontal: radial error against h_acc = √(σ_x² + σ_y²) (a calibrated circular
+/// Gaussian puts 63 % inside, 98 % inside 2 h_acc); vertical: |z error| against
+/// v_acc = σ_z (68 %, 95 %).
+#[derive(Debug, Default, Clone, Copy)]
+pub struct Calibration {
+    pub n: usize,
+    pub h1: usize,
+    pub h2: usize,
+    pub v1: usize,
+    pub v2: usize,
+}
+
+impl Calibration {
+    fn push(&mut self, est: &geolocation::Estimate, truth: nalgebra::Point3<f64>) {
+        let h_acc = (est.covariance[(0, 0)] + est.covariance[(1, 1)])
+            .max(0.0)
+            .sqrt();
+        let v_acc = est.altitude_std_error_m;
+        let d = est.position - truth;
+        let (h, v) = ((d.x * d.x + d.y * d.y).sqrt(), d.z.abs());
+        if !(h_acc.is_finite() && v_acc.is_finite()) {
+            return;
+        }
+        self.n += 1;
+        self.h1 += (h <= h_acc) as usize;
+        self.h2 += (h <= 2.0 * h_acc) as usize;
+        self.v1 += (v <= v_acc) as usize;
+        self.v2 += (v <= 2.0 * v_acc) as usize;
+    }
+
+    pub fn shares(&self) -> [f64; 4] {
+        let f = |k: usize| {
+            if self.n == 0 {
+                f64::NAN
+            } else {
+                100.0 * k as f64 / self.n as f64
+            }
+        };
+        [f(self.h1), f(self.h2), f(self.v1), f(self.v2)]
+    }
+}
+
+/// The bias-step scenario: a step added to the biases from `at_s` on.
+#[derive(Debug, Clone, Copy)]
+pub struct BiasStep {
+    pub at_s: f64,
+    pub step_deg: [f64; 2],
+}
+
+/// Seconds after the start of the run before the temporal filter's errors count.
+pub const WARM_UP_S: f64 = 10.0;
+
 /// Everything one scenario gives, for one N.
 #[derive(Debug, Default, Clone)]
 pub struct ScenarioResult {
     pub paper: MethodErrors,
     pub joint: MethodErrors,
+    /// The temporal filter, after the warm-up.
+    pub temporal: MethodErrors,
     pub one_shot: MethodErrors,
+    pub calibration: [Calibration; 3],
+    /// (t, left bias error, right bias error) of the temporal filter, degrees, all times.
+    pub temporal_bias_track: Vec<(f64, f64, f64)>,
+    /// Mean, p99 and largest time of one temporal update, µs.
+    pub temporal_update_us: (f64, f64, f64),
+    /// Times the temporal filter re-opened its covariance (suspected bias steps).
+    pub temporal_reopens: Vec<f64>,
     /// Table 4: k → (|δψ_L|, |δψ_R|, |z|) errors after k iterations (paper's method).
     pub by_iterations: Vec<(usize, MethodErrors)>,
 }
 
 pub const TABLE4_K: [usize; 8] = [1, 2, 3, 4, 8, 12, 16, 20];
 
-fn measured(config: &SimConfig, image: &ImageRef) -> (PoseSample, f64) {
+fn measured(config: &SimConfig, step: Option<BiasStep>, image: &ImageRef) -> (PoseSample, f64) {
     let seed = config.seed
         ^ (image.seq.wrapping_mul(0x9E37_79B9_7F4A_7C15))
         ^ ((image.uav.index() as u64 + 1) << 56);
@@ -93,7 +155,12 @@ fn measured(config: &SimConfig, image: &ImageRef) -> (PoseSample, f64) {
     };
     let n = &config.noise;
     let p = &image.true_pose;
-    let bias = config.bias.at(image.t_s)[image.uav.index()];
+    let mut bias = config.bias.at(image.t_s)[image.uav.index()];
+    if let Some(s) = step {
+        if image.t_s >= s.at_s {
+            bias += s.step_deg[image.uav.index()].to_radians();
+        }
+    }
     let pose = PoseSample {
         x_m: p.x_m + draw(n.sigma_position_m[0]),
         y_m: p.y_m + draw(n.sigma_position_m[1]),
@@ -105,8 +172,8 @@ fn measured(config: &SimConfig, image: &ImageRef) -> (PoseSample, f64) {
     (pose, bias)
 }
 
-fn observation(config: &SimConfig, image: &ImageRef) -> (Observation, f64) {
-    let (pose, bias) = measured(config, image);
+fn observation(config: &SimConfig, step: Option<BiasStep>, image: &ImageRef) -> (Observation, f64) {
+    let (pose, bias) = measured(config, step, image);
     (
         Observation {
             uav: image.uav,
@@ -143,7 +210,12 @@ pub fn estimator_for(config: &SimConfig) -> EstimatorConfig {
     }
 }
 
-pub fn run(config: &SimConfig, records: &[Record], with_iterations: bool) -> ScenarioResult {
+pub fn run(
+    config: &SimConfig,
+    records: &[Record],
+    with_iterations: bool,
+    step: Option<BiasStep>,
+) -> ScenarioResult {
     let estimator = estimator_for(config);
     let joint = EstimatorConfig {
         method: EstimatorMethod::Joint,
@@ -160,26 +232,67 @@ pub fn run(config: &SimConfig, records: &[Record], with_iterations: bool) -> Sce
         },
         ..Default::default()
     };
+    let mut temporal = TemporalEstimator::new(estimator).ok();
+    let start_t = records.first().map_or(0.0, |r| r.current[0].t_s);
+    let mut update_us: Vec<f64> = Vec::new();
     for r in records {
-        let (cl, bl) = observation(config, &r.current[0]);
-        let (cr, br) = observation(config, &r.current[1]);
-        let past: Vec<Observation> = r.past.iter().map(|i| observation(config, i).0).collect();
+        let t_s = r.current[0].t_s;
+        let (cl, bl) = observation(config, step, &r.current[0]);
+        let (cr, br) = observation(config, step, &r.current[1]);
+        let past_ids: Vec<(ImageId, Observation)> = r
+            .past
+            .iter()
+            .map(|i| ((i.uav, i.seq), observation(config, step, i).0))
+            .collect();
+        let past: Vec<Observation> = past_ids.iter().map(|(_, o)| *o).collect();
         let true_bias = [bl, br];
-        match geolocate_filtered(&cl, &cr, &past, &estimator) {
-            Ok(f) => out.paper.push(
-                f.estimate.position,
-                r.target,
-                Some((f.estimate.yaw_bias, true_bias)),
-            ),
+        let paper = geolocate_filtered(&cl, &cr, &past, &estimator);
+        match &paper {
+            Ok(f) => {
+                out.paper.push(
+                    f.estimate.position,
+                    r.target,
+                    Some((f.estimate.yaw_bias, true_bias)),
+                );
+                out.calibration[0].push(&f.estimate, r.target);
+            }
             Err(_) => out.paper.rejected += 1,
         }
         match geolocate_configured(&cl, &cr, &past, &joint) {
-            Ok(f) => out.joint.push(
-                f.estimate.position,
-                r.target,
-                Some((f.estimate.yaw_bias, true_bias)),
-            ),
+            Ok(f) => {
+                out.joint.push(
+                    f.estimate.position,
+                    r.target,
+                    Some((f.estimate.yaw_bias, true_bias)),
+                );
+                out.calibration[1].push(&f.estimate, r.target);
+            }
             Err(_) => out.joint.rejected += 1,
+        }
+        if let Some(filter) = temporal.as_mut() {
+            let window = paper.as_ref().ok().map(|f| &f.estimate);
+            let started = std::time::Instant::now();
+            let result = filter.update(t_s, [&cl, &cr], &past_ids, window);
+            update_us.push(started.elapsed().as_secs_f64() * 1e6);
+            match result {
+                Ok(e) => {
+                    if e.reopened {
+                        out.temporal_reopens.push(t_s);
+                    }
+                    let b = e.estimate.yaw_bias;
+                    out.temporal_bias_track.push((
+                        t_s,
+                        wrap_angle(b[0] - true_bias[0]).to_degrees(),
+                        wrap_angle(b[1] - true_bias[1]).to_degrees(),
+                    ));
+                    if t_s - start_t >= WARM_UP_S {
+                        out.temporal
+                            .push(e.estimate.position, r.target, Some((b, true_bias)));
+                        out.calibration[2].push(&e.estimate, r.target);
+                    }
+                }
+                Err(_) => out.temporal.rejected += 1,
+            }
         }
         match one_shot(&cl, r.range_left_m) {
             Ok(p) => out.one_shot.push(p, r.target, None),
@@ -200,6 +313,13 @@ pub fn run(config: &SimConfig, records: &[Record], with_iterations: bool) -> Sce
                 Err(_) => errors.rejected += 1,
             }
         }
+    }
+    if !update_us.is_empty() {
+        let mean = update_us.iter().sum::<f64>() / update_us.len() as f64;
+        update_us.sort_by(f64::total_cmp);
+        let p99 = update_us[(update_us.len() * 99 / 100).min(update_us.len() - 1)];
+        let max = update_us[update_us.len() - 1];
+        out.temporal_update_us = (mean, p99, max);
     }
     out
 }

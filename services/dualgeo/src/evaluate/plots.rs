@@ -102,3 +102,74 @@ pub fn sweep(
     root.present().map_err(err)?;
     Ok(())
 }
+
+/// Lines over time (the bias-step scenario): (name, [(t, value)]).
+pub fn time_series(
+    path: &Path,
+    title: &str,
+    y_label: &str,
+    lines: &[(String, Vec<(f64, f64)>)],
+    marks: &[f64],
+) -> Result<()> {
+    let text = font_available();
+    let root = BitMapBackend::new(path, (1000, 500)).into_drawing_area();
+    root.fill(&WHITE).map_err(err)?;
+    let pts = lines.iter().flat_map(|(_, l)| l.iter());
+    let (mut x0, mut x1, mut y0, mut y1) = (f64::MAX, f64::MIN, f64::MAX, f64::MIN);
+    for &(x, y) in pts {
+        x0 = x0.min(x);
+        x1 = x1.max(x);
+        y0 = y0.min(y);
+        y1 = y1.max(y);
+    }
+    if x0 > x1 {
+        return Err(anyhow!("no points to plot"));
+    }
+    let pad = ((y1 - y0) * 0.1).max(0.5);
+    let mut builder = ChartBuilder::on(&root);
+    builder
+        .margin(15)
+        .x_label_area_size(40)
+        .y_label_area_size(55);
+    if text {
+        builder.caption(title, ("sans-serif", 22));
+    }
+    let mut chart = builder
+        .build_cartesian_2d(x0..x1, y0 - pad..y1 + pad)
+        .map_err(err)?;
+    let mut mesh = chart.configure_mesh();
+    mesh.x_desc("t (s)").y_desc(y_label).light_line_style(WHITE);
+    if !text {
+        mesh.x_labels(0).y_labels(0);
+    }
+    mesh.draw().map_err(err)?;
+    for &m in marks {
+        chart
+            .draw_series(LineSeries::new([(x0, m), (x1, m)], BLACK.mix(0.4)))
+            .map_err(err)?;
+    }
+    for (i, (name, line)) in lines.iter().enumerate() {
+        let colour = COLOURS[i % COLOURS.len()];
+        let s = chart
+            .draw_series(LineSeries::new(
+                line.iter().copied(),
+                colour.stroke_width(2),
+            ))
+            .map_err(err)?;
+        if text {
+            s.label(name.clone()).legend(move |(x, y)| {
+                PathElement::new(vec![(x, y), (x + 20, y)], colour.stroke_width(2))
+            });
+        }
+    }
+    if text {
+        chart
+            .configure_series_labels()
+            .background_style(WHITE.mix(0.85))
+            .border_style(BLACK)
+            .draw()
+            .map_err(err)?;
+    }
+    root.present().map_err(err)?;
+    Ok(())
+}

@@ -2,7 +2,7 @@
 //!
 //! - `track.csv`: one row per estimate: t_s, pair_seq, x_m, y_m, z_m, lat_deg, lon_deg,
 //!   alt_m (empty without a geodetic origin), yaw_bias_left_deg, yaw_bias_right_deg,
-//!   images_used, iterations.
+//!   images_used, iterations, h_acc_m, v_acc_m (1σ horizontal and vertical accuracy).
 //! - `track.geojson`: the track as a WGS84 LineString ([lon, lat, alt]) when the source
 //!   has an origin.
 //! - `path.png`: the estimated path against truth, when truth exists.
@@ -81,6 +81,15 @@ fn geodetic(origin: &Origin, p: &[f64; 3]) -> (f64, f64, f64) {
     (lat.to_degrees(), lon.to_degrees(), alt)
 }
 
+/// 1σ horizontal and vertical accuracy (MAVLink CAMERA_TRACKING_GEO_STATUS's h_acc and
+/// v_acc): √(σ_x² + σ_y²) from the estimate's covariance, and σ_z. `None` when the
+/// estimator gave no finite figure.
+fn one_sigma(e: &EstimateMsg) -> Option<(f64, f64)> {
+    let h = (e.covariance[0] + e.covariance[5]).sqrt();
+    let v = e.altitude_std_error_m;
+    (h.is_finite() && v.is_finite()).then_some((h, v))
+}
+
 fn write_track_csv(path: &Path, estimates: &[&EstimateMsg], origin: Option<&Origin>) -> Result<()> {
     let mut w =
         csv::Writer::from_path(path).with_context(|| format!("create {}", path.display()))?;
@@ -97,6 +106,8 @@ fn write_track_csv(path: &Path, estimates: &[&EstimateMsg], origin: Option<&Orig
         "yaw_bias_right_deg",
         "images_used",
         "iterations",
+        "h_acc_m",
+        "v_acc_m",
     ])?;
     for e in estimates {
         let geo = origin.map(|o| geodetic(o, &e.position));
@@ -117,6 +128,8 @@ fn write_track_csv(path: &Path, estimates: &[&EstimateMsg], origin: Option<&Orig
             format!("{:.3}", e.yaw_bias_deg[1]),
             e.images_used.to_string(),
             e.iterations.to_string(),
+            one_sigma(e).map_or(String::new(), |(h, _)| format!("{h:.3}")),
+            one_sigma(e).map_or(String::new(), |(_, v)| format!("{v:.3}")),
         ])?;
     }
     w.flush()
