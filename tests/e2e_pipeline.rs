@@ -157,7 +157,37 @@ fn pipeline_on_a_recording_and_a_corrupt_image() {
         "{hgrm}"
     );
 
-    // 2. A truncated image: named in the log, its pair skipped, the run goes on.
+    // 2. The temporal estimator in the geolocation service, chosen by configuration.
+    let config = dir.join("temporal.toml");
+    std::fs::write(&config, "[estimator]\nmethod = \"temporal\"\n").unwrap();
+    let out_t = dir.s("out-temporal");
+    let o = dualgeo(&[
+        "run",
+        "--source",
+        &rec,
+        "--rate",
+        "max",
+        "--config",
+        config.to_str().unwrap(),
+        "--out",
+        &out_t,
+    ]);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    let report = json(&dir.join("out-temporal/report.json"));
+    assert!(report["estimates_out"].as_u64().unwrap() >= 40, "{report}");
+    assert_eq!(
+        report["frames_dropped"], 0,
+        "--rate max is lossless: {report}"
+    );
+    let track = std::fs::read_to_string(dir.join("out-temporal/track.csv")).unwrap();
+    let last: Vec<&str> = track.lines().last().unwrap().split(',').collect();
+    let (h_acc, v_acc): (f64, f64) = (last[12].parse().unwrap(), last[13].parse().unwrap());
+    assert!(
+        h_acc > 0.0 && h_acc < 5.0 && v_acc > 0.0 && v_acc < 5.0,
+        "{track}"
+    );
+
+    // 3. A truncated image: named in the log, its pair skipped, the run goes on.
     let victim = dir.join("rec/left/000100.png");
     let bytes = std::fs::read(&victim).unwrap();
     std::fs::write(&victim, &bytes[..bytes.len() / 2]).unwrap();
