@@ -8,7 +8,7 @@
 
 use anyhow::{anyhow, Context, Result};
 use std::os::unix::process::{CommandExt, ExitStatusExt};
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::process::{Child, Command, ExitStatus};
 use std::time::{Duration, Instant};
 
@@ -46,7 +46,7 @@ pub fn describe(status: ExitStatus) -> String {
 }
 
 impl Service {
-    pub fn spawn(name: &'static str, args: &[String], log_dir: &Path) -> Result<Self> {
+    pub fn spawn(name: &'static str, args: &[String]) -> Result<Self> {
         let binary = service_binary(name)?;
         let mut cmd = Command::new(&binary);
         cmd.args(args);
@@ -63,7 +63,6 @@ impl Service {
                 Ok(())
             });
         }
-        let _ = log_dir;
         let child = cmd
             .spawn()
             .with_context(|| format!("start the {name} service ({})", binary.display()))?;

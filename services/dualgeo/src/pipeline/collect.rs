@@ -30,7 +30,7 @@ pub struct Collector {
 
 /// What a run produced.
 pub struct Collected {
-    /// Every estimate message (valid or not) with the time it was received.
+    /// Every estimate message (valid or not), in arrival order.
     pub estimates: Vec<EstimateMsg>,
     /// The supervisor's own histograms (`transport` of the estimates hop).
     pub stats: StageStats,

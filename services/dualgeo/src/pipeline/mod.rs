@@ -130,7 +130,7 @@ pub fn run(args: &RunArgs) -> Result<()> {
     let mut services: Vec<Service> = Vec::new();
     let started = (|| -> Result<()> {
         for name in ["geolocation", "matching", "detection"] {
-            services.push(Service::spawn(name, &common, out)?);
+            services.push(Service::spawn(name, &common)?);
         }
         collector.wait_connected(
             &mut services,
@@ -157,7 +157,7 @@ pub fn run(args: &RunArgs) -> Result<()> {
             acq.push("--loop".into());
         }
         acq.extend(["--log-dir".into(), stream_dir.display().to_string()]);
-        services.push(Service::spawn("acquisition", &acq, out)?);
+        services.push(Service::spawn("acquisition", &acq)?);
         Ok(())
     })();
     if let Err(e) = started {
