@@ -76,8 +76,12 @@ pub struct TemporalConfig {
     /// Added to the bias σ when the covariance is re-opened, degrees.
     pub reopen_bias_sigma_deg: f64,
     /// σ of a past image's pixel, which comes from the epipolar transfer, not from the
-    /// detector (measured: median 4 px; docs/matching.md).
+    /// detector (measured: median 4 px; docs/matching.md): the part that changes from
+    /// one geolocation to the next ...
     pub transfer_sigma_px: f64,
+    /// ... and the part a keyframe keeps across its reuses (its E estimates resemble
+    /// each other), carried as two states per keyframe.
+    pub transfer_offset_sigma_px: f64,
 }
 
 impl Default for TemporalConfig {
@@ -90,7 +94,8 @@ impl Default for TemporalConfig {
             initial_velocity_sigma_mps: 8.0,
             initial_bias_sigma_deg: 25.0,
             reopen_bias_sigma_deg: 15.0,
-            transfer_sigma_px: 8.0,
+            transfer_sigma_px: 4.0,
+            transfer_offset_sigma_px: 6.0,
         }
     }
 }
@@ -106,6 +111,7 @@ impl TemporalConfig {
             self.initial_bias_sigma_deg,
             self.reopen_bias_sigma_deg,
             self.transfer_sigma_px,
+            self.transfer_offset_sigma_px,
         ];
         if all.iter().all(|v| v.is_finite() && *v > 0.0) {
             Ok(())
@@ -132,6 +138,9 @@ pub struct TemporalEstimator {
 }
 
 const CORE: usize = 7;
+/// States per keyframe: pose error (x, y, z, yaw, pitch, roll) and the offset (u, v)
+/// its epipolar transfer shares across reuses.
+const SLOT: usize = 8;
 
 fn theta(s: &DVector<f64>) -> Theta {
     Theta::new(s[0], s[1], s[2], s[5], s[6])
@@ -205,7 +214,7 @@ impl TemporalEstimator {
         let th = theta(s);
         let e = ray
             .slot
-            .map(|i| s.rows(i, 6).iter().copied().collect::<Vec<f64>>());
+            .map(|i| s.rows(i, SLOT).iter().copied().collect::<Vec<f64>>());
         let r0 = ray_residual(&ray.obs, &th, e.as_deref())?;
         let c = match ray.slot {
             // A keyframe's pose error is in the state: only its transfer error remains.
@@ -223,6 +232,9 @@ impl TemporalEstimator {
             h.view_mut((0, col), (2, 1)).copy_from(&d);
         }
         if let (Some(i), Some(e)) = (ray.slot, &e) {
+            // The transfer offset enters the residual with unit slope.
+            h[(0, i + 6)] = 1.0;
+            h[(1, i + 7)] = 1.0;
             for j in 0..6 {
                 let step = if j < 3 { 1e-4 } else { 1e-7 };
                 let mut ej = e.clone();
@@ -328,7 +340,7 @@ impl TemporalEstimator {
                     .iter()
                     .enumerate()
                     .filter(|(_, id)| ids.contains(id))
-                    .flat_map(|(k, _)| CORE + 6 * k..CORE + 6 * k + 6),
+                    .flat_map(|(k, _)| CORE + SLOT * k..CORE + SLOT * (k + 1)),
             )
             .collect();
         if keep.len() != s.len() {
@@ -340,11 +352,14 @@ impl TemporalEstimator {
             if !self.slots.contains(id) {
                 let sig = self.pose_sigmas(id.0);
                 let n = s.len();
-                s = s.resize_vertically(n + 6, 0.0);
-                p = p.resize(n + 6, n + 6, 0.0);
+                s = s.resize_vertically(n + SLOT, 0.0);
+                p = p.resize(n + SLOT, n + SLOT, 0.0);
                 for j in 0..6 {
                     p[(n + j, n + j)] = sig[j].max(1e-6).powi(2);
                 }
+                let offset = tc.transfer_offset_sigma_px.powi(2);
+                p[(n + 6, n + 6)] = offset;
+                p[(n + 7, n + 7)] = offset;
                 self.slots.push(*id);
             }
         }
@@ -362,7 +377,7 @@ impl TemporalEstimator {
             let k = self.slots.iter().position(|x| x == id);
             rays.push(Ray {
                 obs: *o,
-                slot: k.map(|k| CORE + 6 * k),
+                slot: k.map(|k| CORE + SLOT * k),
             });
         }
 
@@ -410,7 +425,7 @@ impl TemporalEstimator {
             // Keyframes taken before the step carry the old bias: let their yaw errors
             // take up the difference instead of pulling the new bias back.
             for k in 0..self.slots.len() {
-                p[(CORE + 6 * k + 3, CORE + 6 * k + 3)] += sb;
+                p[(CORE + SLOT * k + 3, CORE + SLOT * k + 3)] += sb;
             }
             self.drift = [nalgebra::Vector2::zeros(); 2];
             self.since_reopen = 0;
