@@ -4,42 +4,23 @@
 use hdrhistogram::Histogram;
 use std::time::{Duration, Instant};
 
-/// Latency percentiles in nanoseconds.
-#[derive(Debug, Clone, Copy)]
-pub struct Percentiles {
-    pub samples: u64,
-    pub p50: u64,
-    pub p90: u64,
-    pub p99: u64,
-    pub p999: u64,
-    pub max: u64,
-}
+/// Percentiles of a histogram (the same struct the latency report uses; here the
+/// values are nanoseconds).
+pub use shared_types::stats::Percentiles;
 
-impl Percentiles {
-    pub fn of(h: &Histogram<u64>) -> Self {
-        Self {
-            samples: h.len(),
-            p50: h.value_at_quantile(0.50),
-            p90: h.value_at_quantile(0.90),
-            p99: h.value_at_quantile(0.99),
-            p999: h.value_at_quantile(0.999),
-            max: h.max(),
-        }
-    }
-
-    /// `p50 12.3 µs  p90 …` in microseconds.
-    pub fn micros_line(&self) -> String {
-        let us = |ns: u64| ns as f64 / 1e3;
-        format!(
-            "p50 {:8.2} µs  p90 {:8.2} µs  p99 {:8.2} µs  p99.9 {:8.2} µs  max {:9.2} µs  (n={})",
-            us(self.p50),
-            us(self.p90),
-            us(self.p99),
-            us(self.p999),
-            us(self.max),
-            self.samples
-        )
-    }
+/// `p50 12.3 µs  p90 …  (n=…)` for a histogram of nanoseconds.
+pub fn micros_line(h: &Histogram<u64>) -> String {
+    let p = Percentiles::of(h);
+    let us = |ns: u64| ns as f64 / 1e3;
+    format!(
+        "p50 {:8.2} µs  p90 {:8.2} µs  p99 {:8.2} µs  p99.9 {:8.2} µs  max {:9.2} µs  (n={})",
+        us(p.p50),
+        us(p.p90),
+        us(p.p99),
+        us(p.p999),
+        us(p.max),
+        h.len()
+    )
 }
 
 /// Calls `f(i)` for `warmup` then for at least `min_time` (and `min_calls` calls),

@@ -8,7 +8,7 @@
 
 use anyhow::Context;
 use clap::Parser;
-use dualgeo_bench::{time_calls, Percentiles};
+use dualgeo_bench::{micros_line, time_calls};
 use geolocation::synthetic::SyntheticScenario;
 use geolocation::{geolocate, EstimatorConfig};
 use rand::rngs::StdRng;
@@ -53,14 +53,13 @@ fn main() -> anyhow::Result<()> {
                 Err(e) => *failures.entry(e.kind()).or_default() += 1,
             },
         );
-        let p = Percentiles::of(&h);
         let images = 2 * images_per_uav;
-        println!("  {images} images: {}", p.micros_line());
+        println!("  {images} images: {}", micros_line(&h));
         println!(
             "             mean iterations {:.2}, rejected {failures:?}",
             iterations as f64 / (h.len() as f64 + 200.0)
         );
-        medians.push((images, p.p50));
+        medians.push((images, h.value_at_quantile(0.5)));
     }
     if let [(_, a), (n8, b)] = medians[..] {
         println!(

@@ -21,7 +21,7 @@
 use acquisition::recording::{
     decode_image_into, Recording, StereoPair, StreamLog, TelemetryRow, TruthRow,
 };
-use acquisition::sim::{Presets, SimConfig, Simulator};
+use acquisition::sim::{ScenarioArgs, SimConfig, Simulator};
 use anyhow::{bail, Context, Result};
 use clap::Parser;
 use iceoryx2::prelude::EventId;
@@ -42,18 +42,9 @@ struct Args {
     /// `sim` (the live simulator) or a recording directory.
     #[arg(long, default_value = "sim")]
     source: String,
-    /// Simulator preset.
-    #[arg(long, default_value = "default")]
-    preset: String,
-    /// A presets file instead of the built-in one.
-    #[arg(long)]
-    presets: Option<PathBuf>,
-    /// Simulator: override the preset's duration, seconds.
-    #[arg(long)]
-    duration_s: Option<f64>,
-    /// Simulator: override the preset's noise seed.
-    #[arg(long)]
-    seed: Option<u64>,
+    /// The simulated scenario (with `--source sim`).
+    #[command(flatten)]
+    scenario: ScenarioArgs,
     /// `realtime` (the recorded/simulated clock), `max` (as fast as possible) or a pair
     /// rate in Hz.
     #[arg(long, default_value = "realtime")]
@@ -109,17 +100,7 @@ enum Source {
 impl Source {
     fn open(args: &Args) -> Result<Self> {
         if args.source == "sim" {
-            let presets = match &args.presets {
-                Some(p) => Presets::from_file(p)?,
-                None => Presets::builtin(),
-            };
-            let mut config = presets.get(&args.preset)?;
-            if let Some(d) = args.duration_s {
-                config.duration_s = d;
-            }
-            if let Some(s) = args.seed {
-                config.seed = s;
-            }
+            let config = args.scenario.config()?;
             let sim = Box::new(Simulator::new(config.clone())?);
             Ok(Source::Sim {
                 config: Box::new(config),

@@ -1,6 +1,6 @@
 //! `dualgeo simulate`: render a scenario preset into a recording (format v1).
 
-use acquisition::sim::{record, Presets, Simulator};
+use acquisition::sim::{record, ScenarioArgs, Simulator};
 use anyhow::{Context, Result};
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
@@ -10,21 +10,11 @@ use std::time::Instant;
 
 #[derive(Args, Debug)]
 pub struct SimulateArgs {
-    /// Preset name (see --list).
-    #[arg(long, default_value = "default")]
-    preset: String,
+    #[command(flatten)]
+    scenario: ScenarioArgs,
     /// Output folder for the recording (must not exist or be empty).
     #[arg(long, required_unless_present_any = ["list", "print"])]
     out: Option<PathBuf>,
-    /// A presets file instead of the built-in one (services/acquisition/presets/scenarios.toml).
-    #[arg(long)]
-    presets: Option<PathBuf>,
-    /// Override the preset's duration, seconds.
-    #[arg(long)]
-    duration_s: Option<f64>,
-    /// Override the preset's noise seed.
-    #[arg(long)]
-    seed: Option<u64>,
     /// List the presets and exit.
     #[arg(long)]
     list: bool,
@@ -34,10 +24,7 @@ pub struct SimulateArgs {
 }
 
 pub fn run(args: &SimulateArgs) -> Result<()> {
-    let presets = match &args.presets {
-        Some(path) => Presets::from_file(path)?,
-        None => Presets::builtin(),
-    };
+    let presets = args.scenario.presets()?;
     if args.list {
         for name in presets.names() {
             let description = presets
@@ -48,13 +35,7 @@ pub fn run(args: &SimulateArgs) -> Result<()> {
         }
         return Ok(());
     }
-    let mut config = presets.get(&args.preset)?;
-    if let Some(d) = args.duration_s {
-        config.duration_s = d;
-    }
-    if let Some(seed) = args.seed {
-        config.seed = seed;
-    }
+    let config = args.scenario.config()?;
     if args.print {
         print!(
             "{}",
@@ -79,7 +60,7 @@ pub fn run(args: &SimulateArgs) -> Result<()> {
     } else {
         ProgressBar::hidden()
     };
-    let summary = record(&mut sim, &args.preset, out, |done, total| {
+    let summary = record(&mut sim, &args.scenario.preset, out, |done, total| {
         bar.set_position(done);
         if bar.is_hidden() && (done % 300 == 0 || done == total) {
             eprintln!("simulate: {done}/{total} stereo pairs");

@@ -36,6 +36,16 @@ fn check_container(path: &Path, bytes: &[u8]) -> Result<(), RecordingError> {
     Err(unreadable(path, "neither PNG nor JPEG"))
 }
 
+/// The file's bytes, after checking its container's start and end markers.
+fn read_checked(path: &Path) -> Result<Vec<u8>, RecordingError> {
+    let bytes = std::fs::read(path).map_err(|e| match e.kind() {
+        std::io::ErrorKind::NotFound => RecordingError::MissingFile { path: path.into() },
+        _ => RecordingError::io(path, e),
+    })?;
+    check_container(path, &bytes)?;
+    Ok(bytes)
+}
+
 /// Reads and decodes an image file as 8-bit BGR straight into `dst` (packed rows,
 /// `width × height × 3` bytes: a loaned shared-memory sample), without an intermediate
 /// image. Grey images are expanded to BGR. Checks the container and the size.
@@ -45,11 +55,7 @@ pub fn decode_image_into(
     height: u32,
     dst: &mut [u8],
 ) -> Result<(), RecordingError> {
-    let bytes = std::fs::read(path).map_err(|e| match e.kind() {
-        std::io::ErrorKind::NotFound => RecordingError::MissingFile { path: path.into() },
-        _ => RecordingError::io(path, e),
-    })?;
-    check_container(path, &bytes)?;
+    let bytes = read_checked(path)?;
     let expected = width as usize * height as usize * 3;
     if dst.len() != expected {
         return Err(unreadable(
@@ -89,11 +95,7 @@ pub fn decode_image_into(
 
 /// Reads and decodes an image file, checking format, depth, channels and size.
 pub fn decode_image(path: &Path, width: u32, height: u32) -> Result<cv::Mat, RecordingError> {
-    let bytes = std::fs::read(path).map_err(|e| match e.kind() {
-        std::io::ErrorKind::NotFound => RecordingError::MissingFile { path: path.into() },
-        _ => RecordingError::io(path, e),
-    })?;
-    check_container(path, &bytes)?;
+    let bytes = read_checked(path)?;
     let buf = cv::Vector::<u8>::from_slice(&bytes);
     let mat = opencv::imgcodecs::imdecode(&buf, opencv::imgcodecs::IMREAD_UNCHANGED)
         .map_err(|e| unreadable(path, e.message))?;

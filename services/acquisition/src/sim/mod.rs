@@ -10,11 +10,13 @@ pub mod motion;
 pub mod record;
 pub mod render;
 pub mod scenario;
+pub mod scenario_args;
 pub mod simulator;
 pub mod texture;
 
 pub use record::{record, RecordSummary};
 pub use scenario::{Presets, SimConfig};
+pub use scenario_args::ScenarioArgs;
 pub use simulator::{SimFrame, SimStep, Simulator};
 
 use crate::recording::RecordingError;

@@ -29,18 +29,9 @@ pub struct RunArgs {
     /// `sim` (the live simulator) or a recording directory.
     #[arg(long, default_value = "sim")]
     pub source: String,
-    /// Simulator preset (see `dualgeo simulate --list`).
-    #[arg(long, default_value = "default")]
-    pub preset: String,
-    /// A presets file instead of the built-in one.
-    #[arg(long)]
-    pub presets: Option<PathBuf>,
-    /// Simulator: override the preset's duration, seconds.
-    #[arg(long)]
-    pub duration_s: Option<f64>,
-    /// Simulator: override the preset's noise seed.
-    #[arg(long)]
-    pub seed: Option<u64>,
+    /// The simulated scenario (with `--source sim`).
+    #[command(flatten)]
+    pub scenario: acquisition::sim::ScenarioArgs,
     /// `realtime` (the recording's clock; the simulator's 30 FPS), `max`, or pairs/s.
     #[arg(long, default_value = "realtime")]
     pub rate: String,
@@ -143,16 +134,7 @@ pub fn run(args: &RunArgs) -> Result<()> {
             "--rate".into(),
             args.rate.clone(),
         ]);
-        acq.extend(["--preset".into(), args.preset.clone()]);
-        if let Some(p) = &args.presets {
-            acq.extend(["--presets".into(), p.display().to_string()]);
-        }
-        if let Some(d) = args.duration_s {
-            acq.extend(["--duration-s".into(), d.to_string()]);
-        }
-        if let Some(s) = args.seed {
-            acq.extend(["--seed".into(), s.to_string()]);
-        }
+        acq.extend(args.scenario.to_args());
         if args.looping {
             acq.push("--loop".into());
         }

@@ -19,7 +19,6 @@ use super::latency::{self, Gathered, LatencyReport};
 use super::plots;
 use super::RunArgs;
 use acquisition::recording::{Origin, RecordingMeta};
-use acquisition::sim::Presets;
 use anyhow::{Context, Result};
 use serde::Serialize;
 use shared_types::messages::{EstimateMsg, EstimateStatus};
@@ -39,11 +38,7 @@ struct Report {
 /// Where truth lives, the frame rate and the geodetic origin of the run's source.
 fn source_facts(args: &RunArgs, stream_dir: &Path) -> Result<(PathBuf, f64, Option<Origin>)> {
     if args.source == "sim" {
-        let presets = match &args.presets {
-            Some(p) => Presets::from_file(p)?,
-            None => Presets::builtin(),
-        };
-        let config = presets.get(&args.preset)?;
+        let config = args.scenario.config()?;
         Ok((
             stream_dir.to_path_buf(),
             config.frame_rate_hz,
