@@ -46,6 +46,10 @@ enum Command {
 }
 
 fn main() -> Result<()> {
+    // Like other Unix tools, end quietly when the reader of our output goes away
+    // (`dualgeo simulate --list | head`) instead of panicking on a broken pipe.
+    // SAFETY: restoring the default disposition of SIGPIPE before any thread starts.
+    unsafe { libc::signal(libc::SIGPIPE, libc::SIG_DFL) };
     tracing_subscriber::fmt()
         .with_env_filter(
             EnvFilter::try_from_default_env().unwrap_or_else(|_| EnvFilter::new("warn")),
