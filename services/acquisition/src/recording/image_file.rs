@@ -36,6 +36,26 @@ fn check_container(path: &Path, bytes: &[u8]) -> Result<(), RecordingError> {
     Err(unreadable(path, "neither PNG nor JPEG"))
 }
 
+/// The decoded image must have the size recording.toml gives.
+fn check_size(
+    path: &Path,
+    mat: &impl MatTraitConst,
+    width: u32,
+    height: u32,
+) -> Result<(), RecordingError> {
+    let (got_width, got_height) = (mat.cols() as u32, mat.rows() as u32);
+    if (got_width, got_height) != (width, height) {
+        return Err(RecordingError::ImageSize {
+            path: path.into(),
+            want_width: width,
+            want_height: height,
+            got_width,
+            got_height,
+        });
+    }
+    Ok(())
+}
+
 /// The file's bytes, after checking its container's start and end markers.
 fn read_checked(path: &Path) -> Result<Vec<u8>, RecordingError> {
     let bytes = std::fs::read(path).map_err(|e| match e.kind() {
@@ -79,16 +99,14 @@ pub fn decode_image_into(
             "the decoder could not read it (corrupt data)",
         ));
     }
-    // A different size makes OpenCV allocate its own buffer instead of writing ours.
-    let (got_width, got_height) = (mat.cols() as u32, mat.rows() as u32);
-    if (got_width, got_height) != (width, height) || mat.data() != dst_ptr {
-        return Err(RecordingError::ImageSize {
-            path: path.into(),
-            want_width: width,
-            want_height: height,
-            got_width,
-            got_height,
-        });
+    check_size(path, &mat, width, height)?;
+    // Same size and type: OpenCV wrote into our buffer (any other size would have made
+    // it allocate its own, which `check_size` has ruled out).
+    if mat.data() != dst_ptr {
+        return Err(unreadable(
+            path,
+            "the decoder did not write into the frame buffer",
+        ));
     }
     Ok(())
 }
@@ -115,16 +133,7 @@ pub fn decode_image(path: &Path, width: u32, height: u32) -> Result<cv::Mat, Rec
             ),
         ));
     }
-    let (got_width, got_height) = (mat.cols() as u32, mat.rows() as u32);
-    if (got_width, got_height) != (width, height) {
-        return Err(RecordingError::ImageSize {
-            path: path.into(),
-            want_width: width,
-            want_height: height,
-            got_width,
-            got_height,
-        });
-    }
+    check_size(path, &mat, width, height)?;
     Ok(mat)
 }
 
