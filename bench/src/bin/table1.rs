@@ -4,7 +4,7 @@
 //! per axis before and after the filter beside the paper's figures, and the per-step
 //! time split of the chain (one thread).
 //!
-//! Run: `cargo run --release -p dualgeo-bench --bin table1 [-- --every 3 --method essential]`
+//! Run: `cargo run --release -p dualgeo-bench --bin table1 [-- --every 3 --method ground_plane]`
 
 use acquisition::sim::{Presets, Simulator};
 use anyhow::Result;
@@ -23,13 +23,13 @@ struct Args {
     /// Process every k-th stereo pair of the 40 s route (1 = all 1200).
     #[arg(long, default_value_t = 3)]
     every: u64,
-    /// essential | magsac | ransac8
-    #[arg(long, default_value = "essential")]
+    /// ground_plane | essential | magsac | ransac8
+    #[arg(long, default_value = "ground_plane")]
     method: String,
     /// ORB features per frame (default: MatchingConfig's).
     #[arg(long)]
     orb_features: Option<i32>,
-    /// RANSAC/MAGSAC iteration cap (default: MatchingConfig's).
+    /// RANSAC/USAC iteration cap for F and E (default: MatchingConfig's).
     #[arg(long)]
     max_iterations: Option<i32>,
     /// USAC score: magsac | msac.
@@ -41,6 +41,25 @@ struct Args {
     /// USAC local-optimisation rounds.
     #[arg(long)]
     lo_iterations: Option<i32>,
+    /// ORB keypoint ranking: fast | harris (default: MatchingConfig's).
+    #[arg(long)]
+    orb_score: Option<String>,
+    /// Refine keypoints with cornerSubPix: true | false (default: MatchingConfig's).
+    #[arg(long)]
+    subpixel: Option<bool>,
+    /// Ground-plane homography iteration cap (default: MatchingConfig's).
+    #[arg(long)]
+    homography_iterations: Option<i32>,
+    /// Reject past images whose two epipolar lines meet at less than this, degrees
+    /// (default: MatchingConfig's).
+    #[arg(long)]
+    min_line_angle: Option<f64>,
+    /// Guided-matching window, pixels (0 = brute force always; default: MatchingConfig's).
+    #[arg(long)]
+    guided_radius: Option<f64>,
+    /// Also list the N geolocations with the largest 3-D error after the filter.
+    #[arg(long, default_value_t = 0)]
+    worst: usize,
 }
 
 fn main() -> Result<()> {
@@ -53,7 +72,9 @@ fn main() -> Result<()> {
         fundamental: match args.method.as_str() {
             "magsac" => FundamentalMethod::Magsac,
             "ransac8" => FundamentalMethod::Ransac8Point,
-            _ => FundamentalMethod::Essential,
+            "essential" => FundamentalMethod::Essential,
+            "ground_plane" => FundamentalMethod::GroundPlane,
+            other => anyhow::bail!("unknown --method {other:?}"),
         },
         ..MatchingConfig::default()
     };
@@ -74,6 +95,21 @@ fn main() -> Result<()> {
     if let Some(n) = args.lo_iterations {
         matching.usac_lo_iterations = n;
     }
+    if let Some(s) = &args.orb_score {
+        matching.orb_score = toml::Value::String(s.clone()).try_into()?;
+    }
+    if let Some(b) = args.subpixel {
+        matching.subpixel_keypoints = b;
+    }
+    if let Some(a) = args.min_line_angle {
+        matching.min_line_angle_deg = a;
+    }
+    if let Some(r) = args.guided_radius {
+        matching.guided_radius_px = r;
+    }
+    if let Some(n) = args.homography_iterations {
+        matching.homography_max_iterations = n;
+    }
     let mut chain = VisionChain::new(matching, EstimatorConfig::default())?;
     let mut images = [
         cv::Mat::new_rows_cols_with_default(h, w, cv::CV_8UC3, cv::Scalar::all(0.0))?,
@@ -83,6 +119,10 @@ fn main() -> Result<()> {
     let mut after: [Vec<f64>; 3] = Default::default();
     let mut steps: [Vec<f64>; 6] = Default::default();
     let mut outcomes = BTreeMap::<String, usize>::new();
+    // (3-D error, t, error vector, past images kept by the filter, past points,
+    // detector error in the current left and right images)
+    type Worst = (f64, f64, nalgebra::Vector3<f64>, usize, usize, [f64; 2]);
+    let mut worst = Vec::<Worst>::new();
     let mut k = 0;
     while let Some(step) = sim.step() {
         k += 1;
@@ -122,6 +162,13 @@ fn main() -> Result<()> {
             ChainOutcome::NotEnoughHistory { .. } => "warming up".to_string(),
             ChainOutcome::Located(located) => {
                 let (filtered, unfiltered) = (&located.filtered, &located.unfiltered);
+                for model in located.past.iter().flat_map(|p| p.models).flatten() {
+                    *outcomes.entry(format!("F model: {model:?}")).or_default() += 1;
+                }
+                for guided in located.past.iter().flat_map(|p| p.guided) {
+                    let how = if guided { "guided" } else { "brute force" };
+                    *outcomes.entry(format!("pairs matched {how}")).or_default() += 1;
+                }
                 if let Ok(e) = unfiltered {
                     let d = e.position - target;
                     (0..3).for_each(|i| before[i].push(d[i]));
@@ -130,6 +177,23 @@ fn main() -> Result<()> {
                     Ok(f) => {
                         let d = f.estimate.position - target;
                         (0..3).for_each(|i| after[i].push(d[i]));
+                        let kept = f.past_rejections.iter().filter(|r| r.is_none()).count();
+                        // Detector error in each current image, pixels.
+                        let det = [0, 1].map(|i| {
+                            let truth = step.frames[i].view.project(&target);
+                            match (inputs[i].detection, truth) {
+                                (Some(p), Some(t)) => (p[0] - t[0]).hypot(p[1] - t[1]),
+                                _ => f64::NAN,
+                            }
+                        });
+                        worst.push((
+                            d.norm(),
+                            step.frames[0].t_s,
+                            d,
+                            kept,
+                            located.past.len(),
+                            det,
+                        ));
                         let t = &result.timing;
                         for (i, v) in [
                             t.orb_us,
@@ -192,6 +256,16 @@ fn main() -> Result<()> {
                 s.mae, s.std, s.max, p[i], s.count
             );
         }
+    }
+    worst.sort_by(|a, b| b.0.total_cmp(&a.0));
+    if args.worst > 0 {
+        println!("\nworst geolocations after the filter:");
+    }
+    for (e, t, d, kept, points, det) in worst.iter().take(args.worst) {
+        println!(
+            "  t {t:6.2} s  error {e:6.3} m  (x {:6.3}, y {:6.3}, z {:6.3})  past images kept {kept} of {points}  detector error {:.2} / {:.2} px",
+            d.x, d.y, d.z, det[0], det[1]
+        );
     }
     println!("\ntime per geolocation, one thread (median / p90, ms):");
     for (i, name) in [

@@ -6,18 +6,21 @@
 
 use crate::config::MatchingConfig;
 use crate::epipolar::{
-    estimate_fundamental, match_points, transfer_point, MatchReject, PairGeometry,
+    estimate_fundamental, match_points, match_points_guided, transfer_point, MatchReject,
+    PairGeometry,
 };
 use crate::features::{Features, OrbExtractor};
+use crate::ground_plane::PlaneModel;
 use crate::ring::{Keyframe, KeyframeRing};
 use geolocation::{
     geolocate, geolocate_filtered, Estimate, EstimatorConfig, EstimatorError, FilteredEstimate,
     Observation,
 };
-use nalgebra::Vector2;
+use nalgebra::{Matrix3, Vector2, Vector3};
 use opencv::core as cv;
-use shared_types::conventions::{Intrinsics, Uav};
+use shared_types::conventions::{camera_to_world, Intrinsics, Uav};
 use shared_types::messages::PoseSample;
+use std::collections::HashMap;
 use std::sync::Arc;
 use std::time::Instant;
 
@@ -111,6 +114,10 @@ pub struct PastMatch {
     pub inliers: [usize; 2],
     /// F_Ln and F_Rn (x_pastᵀ F x_current = 0), for diagnostics.
     pub fundamental: [nalgebra::Matrix3<f64>; 2],
+    /// Which model gave each F (`ground_plane` method only).
+    pub models: [Option<PlaneModel>; 2],
+    /// Whether each side was matched guided by a prior (else brute force).
+    pub guided: [bool; 2],
 }
 
 #[derive(Debug)]
@@ -183,6 +190,31 @@ pub struct VisionChain {
     /// Each UAV's measured position smoothed over time, (t, position): the baseline
     /// constraint's ruler.
     smoothed: [Option<(f64, nalgebra::Point3<f64>)>; 2],
+    /// Guided-matching priors: the last ground homography from each current side to
+    /// each keyframe.
+    priors: HashMap<PriorKey, Prior>,
+}
+
+/// One past image to match, with the prior homography of each current side.
+type Job<'a> = ((Uav, &'a Keyframe), [Option<Matrix3<f64>>; 2]);
+
+/// (current side, keyframe's UAV, keyframe seq).
+type PriorKey = (usize, usize, u64);
+
+/// A ground homography, current → keyframe pixels, found with the current frame of
+/// time `t_s`.
+#[derive(Debug, Clone, Copy)]
+struct Prior {
+    t_s: f64,
+    homography: Matrix3<f64>,
+}
+
+/// One past image's matching: the point (or why none), the homographies to keep as
+/// priors, and which sides were matched guided.
+struct PastResult {
+    result: Result<PastMatch, MatchReject>,
+    homographies: [Option<Matrix3<f64>>; 2],
+    timing: ChainTiming,
 }
 
 fn micros(since: Instant) -> f64 {
@@ -197,13 +229,10 @@ impl VisionChain {
             .map_err(|e| ChainError::Config(e.to_string()))?;
         let ring = || KeyframeRing::new(config.ring_capacity, config.keyframe_spacing_m);
         Ok(Self {
-            orb: OrbExtractor::new(
-                config.orb_features,
-                config.orb_levels,
-                config.subpixel_keypoints,
-            )?,
+            orb: OrbExtractor::new(&config)?,
             rings: [ring(), ring()],
             smoothed: [None, None],
+            priors: HashMap::new(),
             config,
             estimator,
         })
@@ -341,37 +370,46 @@ impl VisionChain {
             .collect();
         let metas = [*current[0], *current[1]];
         let config = &self.config;
-        let run =
-            |chunk: &[(Uav, &Keyframe)]| -> Vec<(Result<PastMatch, MatchReject>, ChainTiming)> {
-                let mut neighbours = Vec::with_capacity(config.orb_features as usize);
-                chunk
-                    .iter()
-                    .map(|(uav, kf)| {
-                        let mut t = ChainTiming::default();
-                        let r = match_past(
-                            config,
-                            *uav,
-                            kf,
-                            &metas,
-                            detections,
-                            features,
-                            &mut neighbours,
-                            &mut t,
-                        );
-                        (r, t)
-                    })
-                    .collect()
-            };
-        let threads = self.config.match_threads.clamp(1, jobs.len().max(1));
-        let per_thread = jobs.len().div_ceil(threads);
-        let results: Vec<(Result<PastMatch, MatchReject>, ChainTiming)> = if threads > 1 {
+        let priors: Vec<[Option<Matrix3<f64>>; 2]> = jobs
+            .iter()
+            .map(|(uav, kf)| {
+                [0, 1].map(|side| {
+                    let prior = self.priors.get(&(side, uav.index(), kf.seq))?;
+                    let age = metas[side].t_s - prior.t_s;
+                    let fresh = (0.0..=config.guided_max_age_s).contains(&age);
+                    (fresh && config.guided_radius_px > 0.0).then_some(prior.homography)
+                })
+            })
+            .collect();
+        let run = |chunk: &[Job]| -> Vec<PastResult> {
+            let mut neighbours = Vec::with_capacity(config.orb_features as usize);
+            chunk
+                .iter()
+                .map(|((uav, kf), prior)| {
+                    match_past(
+                        config,
+                        *uav,
+                        kf,
+                        &metas,
+                        detections,
+                        features,
+                        prior,
+                        &mut neighbours,
+                    )
+                })
+                .collect()
+        };
+        let work: Vec<_> = jobs.iter().copied().zip(priors).collect();
+        let threads = self.config.match_threads.clamp(1, work.len().max(1));
+        let per_thread = work.len().div_ceil(threads);
+        let results: Vec<PastResult> = if threads > 1 {
             std::thread::scope(|scope| {
-                let handles: Vec<_> = jobs
+                let handles: Vec<_> = work
                     .chunks(per_thread)
                     .skip(1)
                     .map(|chunk| scope.spawn(|| run(chunk)))
                     .collect();
-                let mut out = run(jobs.chunks(per_thread).next().unwrap_or(&[]));
+                let mut out = run(work.chunks(per_thread).next().unwrap_or(&[]));
                 for h in handles {
                     match h.join() {
                         Ok(part) => out.extend(part),
@@ -381,16 +419,30 @@ impl VisionChain {
                 out
             })
         } else {
-            run(&jobs)
+            run(&work)
         };
 
         let mut past = Vec::new();
         let mut past_obs = Vec::new();
-        for ((uav, kf), (result, t)) in jobs.iter().zip(results) {
+        let mut new_priors: Vec<(PriorKey, Prior)> = Vec::new();
+        for ((uav, kf), r) in jobs.iter().zip(results) {
+            let t = r.timing;
             timing.matching_us += t.matching_us;
             timing.fundamental_us += t.fundamental_us;
             timing.transfer_us += t.transfer_us;
-            match result {
+            // A side without a new homography (a failed fit) keeps its old prior,
+            // which ages out.
+            for (side, h) in r.homographies.iter().enumerate() {
+                if let Some(homography) = h {
+                    let t_s = metas[side].t_s;
+                    let prior = Prior {
+                        t_s,
+                        homography: *homography,
+                    };
+                    new_priors.push(((side, uav.index(), kf.seq), prior));
+                }
+            }
+            match r.result {
                 Ok(m) => {
                     past_obs.push(observation(*uav, &kf.pose, m.pixel, kf.intrinsics));
                     past.push(m);
@@ -398,6 +450,12 @@ impl VisionChain {
                 Err(reason) => rejections.push((*uav, kf.seq, reason)),
             }
         }
+
+        self.priors.extend(new_priors);
+        // Forget keyframes the rings have evicted.
+        let rings = &self.rings;
+        self.priors
+            .retain(|&(_, uav, seq), _| rings[uav].iter().any(|kf| kf.seq == seq));
 
         Ok(MatchOutcome::Matched(Box::new(MatchedSet {
             current: current_obs,
@@ -408,8 +466,8 @@ impl VisionChain {
 }
 
 /// Eq. (24)–(28) for one past image: F_Ln from the current left image, F_Rn from the
-/// current right one, and the intersection of the two epipolar lines. Adds the step
-/// times to `timing`.
+/// current right one, and the intersection of the two epipolar lines. A side with a
+/// prior homography is matched guided first, and by brute force if that fit fails.
 #[allow(clippy::too_many_arguments)]
 fn match_past(
     config: &MatchingConfig,
@@ -418,22 +476,61 @@ fn match_past(
     current: &[FrameMeta; 2],
     detections: [[f64; 2]; 2],
     features: &[Arc<Features>; 2],
+    priors: &[Option<Matrix3<f64>>; 2],
     neighbours: &mut Vec<Option<crate::hamming::Nearest2>>,
-    timing: &mut ChainTiming,
-) -> Result<PastMatch, MatchReject> {
+) -> PastResult {
+    let mut out = PastResult {
+        result: Err(MatchReject::FundamentalFailed),
+        homographies: [None, None],
+        timing: ChainTiming::default(),
+    };
     let mut geometry: [Option<PairGeometry>; 2] = [None, None];
+    let mut guided = [false, false];
     for side in 0..2 {
-        let t = Instant::now();
-        let (a, b) = match_points(&features[side], &kf.features, config.ratio_test, neighbours);
-        timing.matching_us += micros(t);
-        let t = Instant::now();
-        let result =
-            estimate_fundamental(&a, &b, (&current[side].intrinsics, &kf.intrinsics), config);
-        timing.fundamental_us += micros(t);
-        geometry[side] = Some(result?);
+        // The vertical in the current camera's frame: roll and pitch only (the yaw and
+        // its unknown bias turn about it).
+        let up = camera_to_world(current[side].pose.attitude()).transpose() * Vector3::z();
+        let mut fit = |guide: Option<&Matrix3<f64>>, timing: &mut ChainTiming| {
+            let t = Instant::now();
+            let (a, b) = match guide {
+                Some(h) => match_points_guided(
+                    &features[side],
+                    &kf.features,
+                    h,
+                    config.guided_radius_px as f32,
+                    config.ratio_test,
+                    neighbours,
+                ),
+                None => match_points(&features[side], &kf.features, config.ratio_test, neighbours),
+            };
+            timing.matching_us += micros(t);
+            let t = Instant::now();
+            let intrinsics = (&current[side].intrinsics, &kf.intrinsics);
+            let result = estimate_fundamental(&a, &b, intrinsics, &up, config);
+            timing.fundamental_us += micros(t);
+            result
+        };
+        let mut result = Err(MatchReject::FundamentalFailed);
+        if let Some(h) = &priors[side] {
+            result = fit(Some(h), &mut out.timing);
+            guided[side] = result.is_ok();
+        }
+        if result.is_err() {
+            result = fit(None, &mut out.timing);
+        }
+        match result {
+            Ok(g) => {
+                out.homographies[side] = g.homography;
+                geometry[side] = Some(g);
+            }
+            Err(reason) => {
+                out.result = Err(reason);
+                return out;
+            }
+        }
     }
     let [Some(gl), Some(gr)] = geometry else {
-        return Err(MatchReject::FundamentalFailed);
+        return out;
     };
     let t = Instant::now();
     let pixel = transfer_point(
@@ -445,12 +542,15 @@ fn match_past(
         kf.height,
         config,
     );
-    timing.transfer_us += micros(t);
-    Ok(PastMatch {
+    out.timing.transfer_us += micros(t);
+    out.result = pixel.map(|pixel| PastMatch {
         uav,
         seq: kf.seq,
-        pixel: pixel?,
+        pixel,
         inliers: [gl.inliers, gr.inliers],
         fundamental: [gl.f, gr.f],
-    })
+        models: [gl.model, gr.model],
+        guided,
+    });
+    out
 }

@@ -4,14 +4,36 @@
 use opencv::core as cv;
 use opencv::prelude::*;
 
+use crate::config::{MatchingConfig, OrbScore};
+use crate::grid::PointGrid;
 use crate::hamming::{pack, Descriptor};
 
+/// Cell size of [`Features::grid`], pixels.
+const GRID_CELL_PX: f32 = 32.0;
+
 /// Keypoint positions and their ORB descriptors (same order), packed for
-/// [`crate::hamming::knn2`].
+/// [`crate::hamming::knn2`], and bucketed for guided matching.
 #[derive(Debug, Clone, Default)]
 pub struct Features {
     pub points: Vec<cv::Point2f>,
     pub descriptors: Vec<Descriptor>,
+    pub grid: PointGrid,
+}
+
+impl Features {
+    pub fn new(
+        points: Vec<cv::Point2f>,
+        descriptors: Vec<Descriptor>,
+        width: u32,
+        height: u32,
+    ) -> Self {
+        let xy: Vec<[f32; 2]> = points.iter().map(|p| [p.x, p.y]).collect();
+        Self {
+            grid: PointGrid::new(&xy, width, height, GRID_CELL_PX),
+            points,
+            descriptors,
+        }
+    }
 }
 
 pub struct OrbExtractor {
@@ -21,23 +43,29 @@ pub struct OrbExtractor {
 }
 
 impl OrbExtractor {
-    /// `levels` pyramid levels (scale 1.2); `subpixel` refines each keypoint with
-    /// `cornerSubPix` (ORB keypoints sit on a level's integer grid: ±1.2^level/2 px).
-    pub fn new(features: i32, levels: i32, subpixel: bool) -> opencv::Result<Self> {
+    /// ORB as `config` says: `orb_features` keypoints ranked by `orb_score` on
+    /// `orb_levels` pyramid levels (scale 1.2), refined with `cornerSubPix` when
+    /// `subpixel_keypoints` (ORB keypoints sit on a level's integer grid:
+    /// ±1.2^level/2 px).
+    pub fn new(config: &MatchingConfig) -> opencv::Result<Self> {
+        let score = match config.orb_score {
+            OrbScore::Fast => opencv::features2d::ORB_ScoreType::FAST_SCORE,
+            OrbScore::Harris => opencv::features2d::ORB_ScoreType::HARRIS_SCORE,
+        };
         Ok(Self {
             orb: opencv::features2d::ORB::create(
-                features,
+                config.orb_features,
                 1.2,
-                levels,
+                config.orb_levels,
                 31,
                 0,
                 2,
-                opencv::features2d::ORB_ScoreType::HARRIS_SCORE,
+                score,
                 31,
                 20,
             )?,
             gray: cv::Mat::default(),
-            subpixel,
+            subpixel: config.subpixel_keypoints,
         })
     }
 
@@ -72,9 +100,11 @@ impl OrbExtractor {
                 opencv::Error::new(cv::StsBadSize, "ORB descriptor is not 32 bytes")
             })?);
         }
-        Ok(Features {
-            points: points.to_vec(),
-            descriptors: packed,
-        })
+        Ok(Features::new(
+            points.to_vec(),
+            packed,
+            gray.cols().max(0) as u32,
+            gray.rows().max(0) as u32,
+        ))
     }
 }

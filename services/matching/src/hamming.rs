@@ -6,6 +6,8 @@
 //! four XOR + popcounts. On x86-64 the loop is compiled a second time with the `popcnt`
 //! instruction and picked at run time.
 
+use crate::grid::PointGrid;
+
 /// One 256-bit ORB descriptor.
 pub type Descriptor = [u64; 4];
 
@@ -82,6 +84,46 @@ pub fn knn2(query: &[Descriptor], train: &[Descriptor], out: &mut Vec<Option<Nea
     knn2_generic(query, train, out)
 }
 
+/// Guided matching: like [`knn2`], but each query is compared only with the train
+/// keypoints within `radius` pixels (square window) of its predicted position
+/// (`None`: no prediction, no neighbours). A query with fewer than two candidates gets
+/// `None`, so the ratio test always has a second neighbour to compare with.
+pub fn knn2_within(
+    query: &[Descriptor],
+    predicted: &[Option<[f32; 2]>],
+    train: &[Descriptor],
+    train_grid: &PointGrid,
+    radius: f32,
+    out: &mut Vec<Option<Nearest2>>,
+) {
+    out.clear();
+    out.extend(query.iter().zip(predicted).map(|(q, p)| {
+        let (mut best, mut second, mut best_index, mut seen) = (u32::MAX, u32::MAX, 0, 0);
+        grid_candidates(train_grid, *p, radius, |j| {
+            seen += 1;
+            let d = distance(q, &train[j]);
+            if d < best {
+                second = best;
+                best = d;
+                best_index = j;
+            } else if d < second {
+                second = d;
+            }
+        });
+        (seen >= 2).then_some(Nearest2 {
+            best_index,
+            best,
+            second,
+        })
+    }));
+}
+
+fn grid_candidates(grid: &PointGrid, p: Option<[f32; 2]>, radius: f32, f: impl FnMut(usize)) {
+    if let Some(p) = p {
+        grid.for_each_near(p, radius, f);
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -124,6 +166,49 @@ mod tests {
         assert_eq!(out[0].unwrap().second, distance(&a, &b));
         knn2(&[a], &[b], &mut out);
         assert_eq!(out, vec![None]);
+    }
+
+    #[test]
+    fn guided_search_is_the_brute_force_one_restricted_to_the_window() {
+        let mut rng = rand::rngs::StdRng::seed_from_u64(11);
+        let train: Vec<Descriptor> = (0..400)
+            .map(|_| [rng.random(), rng.random(), rng.random(), rng.random()])
+            .collect();
+        let points: Vec<[f32; 2]> = (0..400)
+            .map(|_| [rng.random_range(0.0..640.0), rng.random_range(0.0..480.0)])
+            .collect();
+        let grid = PointGrid::new(&points, 640, 480, 32.0);
+        let query: Vec<Descriptor> = train.iter().step_by(7).copied().collect();
+        let predicted: Vec<Option<[f32; 2]>> = points
+            .iter()
+            .step_by(7)
+            .enumerate()
+            .map(|(i, p)| (i % 5 != 0).then_some([p[0] + 3.0, p[1] - 2.0]))
+            .collect();
+        let mut out = Vec::new();
+        let r = 40.0;
+        knn2_within(&query, &predicted, &train, &grid, r, &mut out);
+        for ((q, p), n) in query.iter().zip(&predicted).zip(&out) {
+            let Some(p) = p else {
+                assert!(n.is_none());
+                continue;
+            };
+            // Brute force over the keypoints in the window.
+            let window: Vec<Descriptor> = train
+                .iter()
+                .zip(&points)
+                .filter(|(_, t)| (t[0] - p[0]).abs() <= r && (t[1] - p[1]).abs() <= r)
+                .map(|(d, _)| *d)
+                .collect();
+            if window.len() < 2 {
+                assert!(n.is_none());
+                continue;
+            }
+            let n = n.expect("two candidates in the window");
+            assert_eq!(n.best, 0);
+            assert_eq!(train[n.best_index], *q);
+            assert_eq!((n.best, n.second), (0, brute(q, &window).2));
+        }
     }
 
     #[test]

@@ -11,6 +11,8 @@ pub mod chain;
 pub mod config;
 pub mod epipolar;
 pub mod features;
+pub mod grid;
+pub mod ground_plane;
 pub mod hamming;
 pub mod ring;
 
@@ -18,4 +20,4 @@ pub use chain::{
     estimate_matched, ChainOutcome, ChainResult, ChainTiming, FrameInput, FrameMeta, Located,
     MatchOutcome, MatchedSet, PastMatch, VisionChain,
 };
-pub use config::{FundamentalMethod, MatchingConfig, UsacLocalOptimisation, UsacScore};
+pub use config::{FundamentalMethod, MatchingConfig, OrbScore, UsacLocalOptimisation, UsacScore};

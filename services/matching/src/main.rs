@@ -11,7 +11,8 @@
 //! and counted (`frames_dropped`). Histograms (µs): `transport`, `wait`, `orb`, `match`,
 //! `compute` (orb + match of one pair). Counters: `frames`, `pairs`, `sets`,
 //! `frames_lost` (sequence gaps), `frames_dropped`, `no_detection`, `warming_up`,
-//! `past_rejected.<reason>`.
+//! `past_rejected.<reason>`, `essential_fallback` (past images whose F came from the
+//! 5-point E because the dominant plane was not level).
 
 use anyhow::{Context, Result};
 use clap::Parser;
@@ -219,6 +220,17 @@ impl Matcher {
                 None
             }
             MatchOutcome::Matched(m) => {
+                let fallbacks = m
+                    .past
+                    .iter()
+                    .flat_map(|p| p.models)
+                    .filter(|model| {
+                        *model == Some(matching::ground_plane::PlaneModel::EssentialFallback)
+                    })
+                    .count();
+                if fallbacks > 0 {
+                    self.stats.count("essential_fallback", fallbacks as u64);
+                }
                 let mut msg = ObservationSetMsg {
                     pair_seq: seq,
                     capture_ns: hl.capture_ns.min(hr.capture_ns),
@@ -258,11 +270,7 @@ fn main() -> Result<()> {
             MAX_OBSERVATIONS / 2
         );
     }
-    let worker_orb = OrbExtractor::new(
-        config.orb_features,
-        config.orb_levels,
-        config.subpixel_keypoints,
-    )?;
+    let worker_orb = OrbExtractor::new(&config)?;
     let mut matcher = Matcher {
         acks: 0,
         chain: VisionChain::new(config, estimator)?,
