@@ -113,6 +113,15 @@ pub struct EstimatorConfig {
     /// The paper gives no value; 3° separates a wrong correspondence from right ones
     /// on noise-free data (see the consistency tests) while tolerating matching noise.
     pub consistency_threshold_deg: f64,
+    /// Past images the consistency filter must have to compare (those whose group
+    /// (g_L1, g_R1, g_n) could be estimated) for a filtered estimate. Eq. (29)–(32)
+    /// judges a past image by its agreement with the others, so a lone past image is
+    /// never checked. At the default 2, a geolocation with fewer is refused
+    /// (`too_few_past_images_to_compare`) instead of returned unchecked: on the
+    /// Table 1 route, two such geolocations were 60 and 84 m off (docs/matching.md).
+    /// It counts before the filter, so navigation noise, which makes the filter
+    /// reject more, does not refuse more geolocations. 0 or 1 = the paper's behaviour.
+    pub min_past_images_to_compare: usize,
     /// The estimator after the consistency filter.
     pub method: EstimatorMethod,
     /// Huber corner of the joint estimator, on each image's whitened residual norm
@@ -133,6 +142,7 @@ impl Default for EstimatorConfig {
             max_iterations: 20,
             min_ray_angle_deg: 1.0,
             consistency_threshold_deg: 3.0,
+            min_past_images_to_compare: 2,
             method: EstimatorMethod::Paper,
             joint_huber_k: 2.0,
             joint_bias_prior_deg: 30.0,

@@ -144,6 +144,12 @@ pub fn geolocate_filtered(
             Err(e) => past_rejections[n] = Some(PastImageRejection::GroupFailed(e)),
         }
     }
+    if group_biases.len() < config.min_past_images_to_compare {
+        return Err(EstimatorError::TooFewPastImagesToCompare {
+            estimated: group_biases.len(),
+            required: config.min_past_images_to_compare,
+        });
+    }
     let consistency =
         consistency_filter(&group_biases, config.consistency_threshold_deg.to_radians())?;
     for &m in &consistency.rejected {
@@ -235,6 +241,42 @@ mod tests {
         assert!((refined.estimate.yaw_bias[0] - trial.yaw_bias[0]).abs() < 1e-3);
         assert!((refined.estimate.yaw_bias[1] - trial.yaw_bias[1]).abs() < 1e-3);
         assert_eq!(refined.past_rejections, paper.past_rejections);
+    }
+
+    #[test]
+    fn a_lone_past_image_is_refused_unless_configured_otherwise() {
+        use crate::synthetic::SyntheticScenario;
+        use rand::SeedableRng;
+        use shared_types::nav_noise::NavNoise;
+        let scenario = SyntheticScenario {
+            noise: NavNoise::NONE,
+            sigma_pixel_px: 0.0,
+            ..SyntheticScenario::default()
+        };
+        let mut rng = rand::rngs::StdRng::seed_from_u64(5);
+        let trial = scenario.trial(15.0, 4, &mut rng).unwrap();
+        let o = &trial.observations;
+        let config = EstimatorConfig::default();
+        assert_eq!(config.min_past_images_to_compare, 2);
+        // Two past images: compared, estimated.
+        assert!(geolocate_filtered(&o[0], &o[1], &o[2..4], &config).is_ok());
+        // One: nothing to compare it with.
+        let e = geolocate_filtered(&o[0], &o[1], &o[2..3], &config).unwrap_err();
+        assert_eq!(
+            e,
+            EstimatorError::TooFewPastImagesToCompare {
+                estimated: 1,
+                required: 2
+            }
+        );
+        assert_eq!(e.kind(), "too_few_past_images_to_compare");
+        // The paper's behaviour on request.
+        let paper = EstimatorConfig {
+            min_past_images_to_compare: 1,
+            ..config
+        };
+        let lone = geolocate_filtered(&o[0], &o[1], &o[2..3], &paper).unwrap();
+        assert_eq!(lone.past_rejections, vec![None]);
     }
 
     #[test]

@@ -36,6 +36,10 @@ pub enum EstimatorError {
     NonFiniteResult { what: &'static str },
     #[error("consistency filter (N = 2): the two past images disagree by {disagreement_deg:.2}° >= TH; geolocation terminated")]
     InconsistentPastImages { disagreement_deg: f64 },
+    #[error(
+        "only {estimated} past image(s) for the consistency filter to compare; {required} needed"
+    )]
+    TooFewPastImagesToCompare { estimated: usize, required: usize },
     #[error("invalid estimator configuration: {0}")]
     Config(String),
 }
@@ -53,6 +57,7 @@ impl EstimatorError {
             EstimatorError::SingularNormalMatrix { .. } => "singular_normal_matrix",
             EstimatorError::NonFiniteResult { .. } => "non_finite_result",
             EstimatorError::InconsistentPastImages { .. } => "inconsistent_past_images",
+            EstimatorError::TooFewPastImagesToCompare { .. } => "too_few_past_images_to_compare",
             EstimatorError::Config(_) => "config",
         }
     }
