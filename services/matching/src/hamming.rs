@@ -41,29 +41,73 @@ fn distance(a: &Descriptor, b: &Descriptor) -> u32 {
         + (a[3] ^ b[3]).count_ones()
 }
 
+/// The two smallest distances offered so far, and the index of the smallest.
+#[derive(Clone, Copy)]
+struct Best2 {
+    best: u32,
+    second: u32,
+    best_index: usize,
+    seen: usize,
+}
+
+impl Best2 {
+    const EMPTY: Self = Self {
+        best: u32::MAX,
+        second: u32::MAX,
+        best_index: 0,
+        seen: 0,
+    };
+
+    #[inline(always)]
+    fn offer(&mut self, index: usize, d: u32) {
+        self.seen += 1;
+        if d < self.best {
+            self.second = self.best;
+            self.best = d;
+            self.best_index = index;
+        } else if d < self.second {
+            self.second = d;
+        }
+    }
+
+    /// `None` unless two candidates were offered (the ratio test needs a second).
+    fn nearest2(self) -> Option<Nearest2> {
+        (self.seen >= 2).then_some(Nearest2 {
+            best_index: self.best_index,
+            best: self.best,
+            second: self.second,
+        })
+    }
+}
+
 #[inline(always)]
 fn knn2_generic(query: &[Descriptor], train: &[Descriptor], out: &mut Vec<Option<Nearest2>>) {
     out.clear();
     out.extend(query.iter().map(|q| {
-        if train.len() < 2 {
-            return None;
-        }
-        let (mut best, mut second, mut best_index) = (u32::MAX, u32::MAX, 0);
+        let mut acc = Best2::EMPTY;
         for (j, t) in train.iter().enumerate() {
-            let d = distance(q, t);
-            if d < best {
-                second = best;
-                best = d;
-                best_index = j;
-            } else if d < second {
-                second = d;
-            }
+            acc.offer(j, distance(q, t));
         }
-        Some(Nearest2 {
-            best_index,
-            best,
-            second,
-        })
+        acc.nearest2()
+    }));
+}
+
+#[inline(always)]
+fn knn2_within_generic(
+    query: &[Descriptor],
+    predicted: &[Option<[f32; 2]>],
+    train: &[Descriptor],
+    train_grid: &PointGrid,
+    radius: f32,
+    out: &mut Vec<Option<Nearest2>>,
+) {
+    out.clear();
+    out.extend(query.iter().zip(predicted).map(|(q, p)| {
+        let mut acc = Best2::EMPTY;
+        if let Some(p) = p {
+            train_grid.for_each_near(*p, radius, |j| acc.offer(j, distance(q, &train[j])));
+        }
+        acc.nearest2()
     }));
 }
 
@@ -71,6 +115,19 @@ fn knn2_generic(query: &[Descriptor], train: &[Descriptor], out: &mut Vec<Option
 #[target_feature(enable = "popcnt")]
 fn knn2_popcnt(query: &[Descriptor], train: &[Descriptor], out: &mut Vec<Option<Nearest2>>) {
     knn2_generic(query, train, out)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "popcnt")]
+fn knn2_within_popcnt(
+    query: &[Descriptor],
+    predicted: &[Option<[f32; 2]>],
+    train: &[Descriptor],
+    train_grid: &PointGrid,
+    radius: f32,
+    out: &mut Vec<Option<Nearest2>>,
+) {
+    knn2_within_generic(query, predicted, train, train_grid, radius, out)
 }
 
 /// For each query descriptor, its two nearest train descriptors (`None` when the train
@@ -96,32 +153,12 @@ pub fn knn2_within(
     radius: f32,
     out: &mut Vec<Option<Nearest2>>,
 ) {
-    out.clear();
-    out.extend(query.iter().zip(predicted).map(|(q, p)| {
-        let (mut best, mut second, mut best_index, mut seen) = (u32::MAX, u32::MAX, 0, 0);
-        grid_candidates(train_grid, *p, radius, |j| {
-            seen += 1;
-            let d = distance(q, &train[j]);
-            if d < best {
-                second = best;
-                best = d;
-                best_index = j;
-            } else if d < second {
-                second = d;
-            }
-        });
-        (seen >= 2).then_some(Nearest2 {
-            best_index,
-            best,
-            second,
-        })
-    }));
-}
-
-fn grid_candidates(grid: &PointGrid, p: Option<[f32; 2]>, radius: f32, f: impl FnMut(usize)) {
-    if let Some(p) = p {
-        grid.for_each_near(p, radius, f);
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("popcnt") {
+        // SAFETY: the CPU supports popcnt (checked just above).
+        return unsafe { knn2_within_popcnt(query, predicted, train, train_grid, radius, out) };
     }
+    knn2_within_generic(query, predicted, train, train_grid, radius, out)
 }
 
 #[cfg(test)]
