@@ -119,8 +119,9 @@ pub struct EstimatorConfig {
     /// never checked. At the default 2, a geolocation with fewer is refused
     /// (`too_few_past_images_to_compare`) instead of returned unchecked: on the
     /// Table 1 route, two such geolocations were 60 and 84 m off (docs/matching.md).
-    /// It counts before the filter, so navigation noise, which makes the filter
-    /// reject more, does not refuse more geolocations. 0 or 1 = the paper's behaviour.
+    /// It counts the past images before the filter, not after: under the Table 2
+    /// noise the filter rejects many, and counting after it refused 493 of 550 sets
+    /// (137 this way, 106 without the rule). 0 or 1 = the paper's behaviour.
     pub min_past_images_to_compare: usize,
     /// The estimator after the consistency filter.
     pub method: EstimatorMethod,
