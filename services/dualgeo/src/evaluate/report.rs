@@ -326,22 +326,16 @@ pub fn write(
             ok(z <= 2.45),
             ok(jz <= 2.45)
         );
-        let _ = writeln!(
-            w,
-            "| δψ_L MAE ≤ 3.05° | {:.2}°, {} | {:.2}°, {} |",
-            b[0].mae,
-            ok(b[0].mae <= 3.05),
-            jb[0].mae,
-            ok(jb[0].mae <= 3.05)
-        );
-        let _ = writeln!(
-            w,
-            "| δψ_R MAE ≤ 2.55° | {:.2}°, {} | {:.2}°, {} |",
-            b[1].mae,
-            ok(b[1].mae <= 2.55),
-            jb[1].mae,
-            ok(jb[1].mae <= 2.55)
-        );
+        for (u, name, limit) in [(0, "δψ_L", 3.05), (1, "δψ_R", 2.55)] {
+            let _ = writeln!(
+                w,
+                "| {name} MAE ≤ {limit:.2}° | {:.2}°, {} | {:.2}°, {} |",
+                b[u].mae,
+                ok(b[u].mae <= limit),
+                jb[u].mae,
+                ok(jb[u].mae <= limit)
+            );
+        }
     }
     let fig12: Vec<(f64, f64, f64)> = SWEEPS[3]
         .3
