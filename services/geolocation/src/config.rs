@@ -82,17 +82,21 @@ impl Default for NoiseModel {
 }
 
 /// Which estimator runs after the consistency filter.
+///
+/// The default is the one that wins across the scene suite (docs/evaluation.md, "Scene
+/// suite"): the temporal filter. `method = "paper"` gives the paper's per-window
+/// estimator, which `dualgeo evaluate` uses to reproduce the paper's tables.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum EstimatorMethod {
     /// The paper's alternation of altitude (eq. 16–23) and regression (eq. 12–15).
-    #[default]
     Paper,
     /// The paper's estimate refined by one joint weighted least squares over
     /// (x, y, z, δψ_L, δψ_R) on every kept ray (`joint.rs`).
     Joint,
     /// The biases and the target carried across geolocations (`temporal.rs`): a
-    /// stateful filter fed by the paper's per-window estimate of each set.
+    /// stateful filter fed by the paper's per-window estimate of each set. The default.
+    #[default]
     Temporal,
 }
 
@@ -144,7 +148,7 @@ impl Default for EstimatorConfig {
             min_ray_angle_deg: 1.0,
             consistency_threshold_deg: 3.0,
             min_past_images_to_compare: 2,
-            method: EstimatorMethod::Paper,
+            method: EstimatorMethod::default(),
             joint_huber_k: 2.0,
             joint_bias_prior_deg: 30.0,
             temporal: crate::temporal::TemporalConfig::default(),
@@ -202,5 +206,12 @@ mod tests {
         assert_eq!(partial.noise_right.sigma_pixel_px, 2.5);
         assert_eq!(partial.noise_right.sigma_yaw_deg, 2.0);
         assert!(toml::from_str::<EstimatorConfig>("max_iteratons = 7").is_err());
+    }
+
+    #[test]
+    fn the_temporal_filter_is_the_default_and_paper_one_line_away() {
+        assert_eq!(EstimatorConfig::default().method, EstimatorMethod::Temporal);
+        let paper: EstimatorConfig = toml::from_str("method = \"paper\"").unwrap();
+        assert_eq!(paper.method, EstimatorMethod::Paper);
     }
 }

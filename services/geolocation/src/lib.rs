@@ -18,6 +18,7 @@
 
 pub mod altitude;
 pub mod config;
+pub mod configured;
 pub mod consistency;
 pub mod error;
 pub mod evaluation;
@@ -31,6 +32,7 @@ pub mod synthetic;
 pub mod temporal;
 
 pub use config::{EstimatorConfig, EstimatorMethod, NoiseModel};
+pub use configured::{estimate_set, SetEstimate};
 pub use consistency::{
     consistency_filter, geolocate_configured, geolocate_filtered, ConsistencyOutcome,
     FilteredEstimate,

@@ -12,7 +12,7 @@
 use anyhow::{Context, Result};
 use clap::Parser;
 use geolocation::{
-    geolocate_configured, EstimatorConfig, EstimatorMethod, ImageId, Observation, TemporalEstimator,
+    estimate_set, EstimatorConfig, EstimatorMethod, ImageId, Observation, TemporalEstimator,
 };
 use shared_types::clock::{elapsed_us, monotonic_ns};
 use shared_types::messages::{EstimateMsg, EstimateStatus, ObservationSetMsg};
@@ -66,37 +66,25 @@ fn estimate(
             return msg;
         }
     };
-    let window = geolocate_configured(
-        &observations[0],
-        &observations[1],
-        &observations[2..],
-        config,
-    );
-    // The temporal filter: fed every set in time order, started from the window estimate.
-    let result = match temporal {
-        None => window.map(|f| f.estimate),
-        Some(filter) => {
-            let past: Vec<(ImageId, Observation)> = set.entries()[2..]
-                .iter()
-                .zip(&observations[2..])
-                .map(|(entry, o)| ((o.uav, entry.frame_seq), *o))
-                .collect();
-            let start = window.as_ref().ok().map(|f| &f.estimate);
-            filter
-                .update(set.t_s, [&observations[0], &observations[1]], &past, start)
-                .map(|t| {
-                    if t.reopened {
-                        stats.count("temporal_reopened", 1);
-                        tracing::info!(
-                            pair = set.pair_seq,
-                            "bias step suspected: covariance re-opened"
-                        );
-                    }
-                    stats.count("temporal_rays_rejected", t.rays_rejected as u64);
-                    t.estimate
-                })
+    let past: Vec<(ImageId, Observation)> = set.entries()[2..]
+        .iter()
+        .zip(&observations[2..])
+        .map(|(entry, o)| ((o.uav, entry.frame_seq), *o))
+        .collect();
+    let current = [&observations[0], &observations[1]];
+    let result = estimate_set(set.t_s, current, &past, config, temporal).map(|e| {
+        if e.reopened {
+            stats.count("temporal_reopened", 1);
+            tracing::info!(
+                pair = set.pair_seq,
+                "bias step suspected: covariance re-opened"
+            );
         }
-    };
+        if e.velocity.is_some() {
+            stats.count("temporal_rays_rejected", e.rays_rejected as u64);
+        }
+        e.estimate
+    });
     match result {
         Ok(e) => {
             stats.count("estimates", 1);

@@ -1,0 +1,55 @@
+//! The configured estimator on one observation set: what the geolocation service
+//! publishes and `dualgeo evaluate`'s scene suite measures, in one place.
+//!
+//! The per-window estimate comes first ([`geolocate_configured`]: the consistency
+//! filter of eq. 29–32, then the paper's iteration, or the joint estimator). With
+//! `method = "temporal"` the stateful filter is then fed the same set, started from that
+//! window estimate the first time.
+
+use crate::{
+    geolocate_configured, Estimate, EstimatorConfig, EstimatorError, ImageId, Observation,
+    TemporalEstimator,
+};
+
+/// One set's estimate, and what the temporal filter did with it.
+#[derive(Debug, Clone)]
+pub struct SetEstimate {
+    pub estimate: Estimate,
+    /// Target velocity (v_x, v_y) in m/s, when the temporal filter ran.
+    pub velocity: Option<[f64; 2]>,
+    /// The temporal filter re-opened its covariance (bias step suspected).
+    pub reopened: bool,
+    /// Rays the temporal filter gated out.
+    pub rays_rejected: usize,
+}
+
+/// `current` is the current (left, right) pair; `past` the past images with their
+/// identities (UAV, frame sequence number), in the order matching gave them.
+/// `temporal` must be `Some` exactly when `config.method` is `Temporal`.
+pub fn estimate_set(
+    t_s: f64,
+    current: [&Observation; 2],
+    past: &[(ImageId, Observation)],
+    config: &EstimatorConfig,
+    temporal: Option<&mut TemporalEstimator>,
+) -> Result<SetEstimate, EstimatorError> {
+    let past_only: Vec<Observation> = past.iter().map(|(_, o)| *o).collect();
+    let window = geolocate_configured(current[0], current[1], &past_only, config);
+    match temporal {
+        None => window.map(|f| SetEstimate {
+            estimate: f.estimate,
+            velocity: None,
+            reopened: false,
+            rays_rejected: 0,
+        }),
+        Some(filter) => {
+            let start = window.as_ref().ok().map(|f| &f.estimate);
+            filter.update(t_s, current, past, start).map(|t| SetEstimate {
+                estimate: t.estimate,
+                velocity: Some(t.velocity),
+                reopened: t.reopened,
+                rays_rejected: t.rays_rejected,
+            })
+        }
+    }
+}
