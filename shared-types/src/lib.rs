@@ -5,6 +5,7 @@
 
 pub mod clock;
 pub mod conventions;
+pub mod lens;
 pub mod messages;
 pub mod nav_noise;
 pub mod service_names;

@@ -69,7 +69,7 @@ impl PoseSample {
 /// User header of a frame sample; the payload is `stride × height` bytes of pixels.
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
 #[repr(C)]
-#[type_name("dualgeo::FrameHeader/v2")]
+#[type_name("dualgeo::FrameHeader/v3")]
 pub struct FrameHeader {
     /// Per-UAV frame index (the pair index: left and right frames of one instant share it).
     pub seq: u64,
@@ -93,6 +93,10 @@ pub struct FrameHeader {
     pub pose: PoseSample,
     /// Pinhole intrinsics of this camera: fx, fy, cx, cy (pixels).
     pub intrinsics: [f64; 4],
+    /// Lens distortion of the pixels (OpenCV's k1, k2, p1, p2, k3; zeros = pinhole).
+    /// Matching undistorts the detection and the keypoints with it
+    /// ([`crate::lens::Distortion`]).
+    pub distortion: [f64; 5],
 }
 
 impl FrameHeader {
@@ -263,8 +267,9 @@ mod tests {
 
     #[test]
     fn header_layout_is_stable() {
-        // 8+8+8+8 + 1+3+4 + 4+4+4+4 + 6·8 + 4·8 = 136 bytes, 8-aligned, no hidden padding.
-        assert_eq!(std::mem::size_of::<FrameHeader>(), 136);
+        // 8+8+8+8 + 1+3+4 + 4+4+4+4 + 6·8 + 4·8 + 5·8 (distortion) = 176 bytes, 8-aligned,
+        // no hidden padding.
+        assert_eq!(std::mem::size_of::<FrameHeader>(), 176);
         assert_eq!(std::mem::align_of::<FrameHeader>(), 8);
     }
 }

@@ -150,6 +150,7 @@ fn main() -> Result<()> {
                     image,
                     detection: detector.detect(image)?.map(|d| d.centre),
                     intrinsics: sim.intrinsics(),
+                    distortion: sim.distortion(),
                     width: w as u32,
                     height: h as u32,
                 })

@@ -147,6 +147,14 @@ impl Source {
         }
     }
 
+    /// Lens distortion of the pixels this source delivers (OpenCV's five coefficients).
+    fn distortion(&self, uav: Uav) -> [f64; 5] {
+        match self {
+            Source::Sim { sim, .. } => sim.distortion().0,
+            Source::Recording { rec, .. } => rec.meta.uav(uav).camera.distortion,
+        }
+    }
+
     fn period_s(&self) -> f64 {
         match self {
             Source::Sim { config, .. } => 1.0 / config.frame_rate_hz,
@@ -251,6 +259,7 @@ fn main() -> Result<()> {
         let k = source.intrinsics(u);
         [k.fx, k.fy, k.cx, k.cy]
     });
+    let distortion = [Uav::Left, Uav::Right].map(|u| source.distortion(u));
     let mut stats = StageStats::new("acquisition");
     tracing::info!(run = endpoint.run_id(), source = %args.source, width, height, ?rate, "acquisition streaming");
 
@@ -351,6 +360,7 @@ fn main() -> Result<()> {
                 stride: stride as u32,
                 pose: info.poses[uav.index()],
                 intrinsics: intrinsics[uav.index()],
+                distortion: distortion[uav.index()],
                 ..Default::default()
             };
         }

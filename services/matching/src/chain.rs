@@ -19,6 +19,7 @@ use geolocation::{
 use nalgebra::{Matrix3, Vector2, Vector3};
 use opencv::core as cv;
 use shared_types::conventions::{camera_to_world, Intrinsics, Uav};
+use shared_types::lens::Distortion;
 use shared_types::messages::PoseSample;
 use std::collections::HashMap;
 use std::sync::Arc;
@@ -36,6 +37,8 @@ pub struct FrameInput<'a> {
     /// The detector's target pixel, if it found the target.
     pub detection: Option<[f64; 2]>,
     pub intrinsics: Intrinsics,
+    /// The lens distortion of `image` and `detection` (zeros = pinhole).
+    pub distortion: Distortion,
     pub width: u32,
     pub height: u32,
 }
@@ -49,6 +52,7 @@ impl FrameInput<'_> {
             pose: self.pose,
             detection: self.detection,
             intrinsics: self.intrinsics,
+            distortion: self.distortion,
             width: self.width,
             height: self.height,
         }
@@ -56,6 +60,7 @@ impl FrameInput<'_> {
 }
 
 /// A current frame without its pixels: what matching needs once ORB has run.
+/// `detection` is in the recorded (distorted) pixels; matching undistorts it.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct FrameMeta {
     pub seq: u64,
@@ -63,6 +68,7 @@ pub struct FrameMeta {
     pub pose: PoseSample,
     pub detection: Option<[f64; 2]>,
     pub intrinsics: Intrinsics,
+    pub distortion: Distortion,
     pub width: u32,
     pub height: u32,
 }
@@ -182,7 +188,34 @@ impl From<opencv::Error> for ChainError {
     }
 }
 
+/// What the chain had to adapt since the last [`VisionChain::take_counts`]: the
+/// fallbacks and retries that keep it working on scenes unlike the one it was tuned on.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct ChainCounts {
+    /// Current-side matchings run again with `retry_ratio_test`.
+    pub retried_looser_ratio: u64,
+    /// Of those, the ones that then gave a usable F.
+    pub retry_rescued: u64,
+    /// Frames whose FAST threshold was lowered for want of corners.
+    pub fast_threshold_lowered: u64,
+    /// Keypoints dropped because the lens model could not undistort them.
+    pub keypoints_outside_lens: u64,
+    /// Current frames whose detection could not be undistorted.
+    pub detections_outside_lens: u64,
+}
+
+impl std::ops::AddAssign for ChainCounts {
+    fn add_assign(&mut self, c: Self) {
+        self.retried_looser_ratio += c.retried_looser_ratio;
+        self.retry_rescued += c.retry_rescued;
+        self.fast_threshold_lowered += c.fast_threshold_lowered;
+        self.keypoints_outside_lens += c.keypoints_outside_lens;
+        self.detections_outside_lens += c.detections_outside_lens;
+    }
+}
+
 pub struct VisionChain {
+    counts: ChainCounts,
     config: MatchingConfig,
     estimator: EstimatorConfig,
     orb: OrbExtractor,
@@ -215,6 +248,8 @@ struct PastResult {
     result: Result<PastMatch, MatchReject>,
     homographies: [Option<Matrix3<f64>>; 2],
     timing: ChainTiming,
+    /// Sides matched again with `retry_ratio_test`.
+    retried: [bool; 2],
 }
 
 fn micros(since: Instant) -> f64 {
@@ -229,6 +264,7 @@ impl VisionChain {
             .map_err(|e| ChainError::Config(e.to_string()))?;
         let ring = || KeyframeRing::new(config.ring_capacity, config.keyframe_spacing_m);
         Ok(Self {
+            counts: ChainCounts::default(),
             orb: OrbExtractor::new(&config)?,
             rings: [ring(), ring()],
             smoothed: [None, None],
@@ -242,9 +278,21 @@ impl VisionChain {
         &self.rings
     }
 
-    /// ORB features of one frame (BGR or grey).
-    pub fn extract(&mut self, image: &cv::Mat) -> Result<Arc<Features>, ChainError> {
-        Ok(Arc::new(self.orb.extract(image)?))
+    /// ORB features of one frame (BGR or grey), at undistorted positions.
+    pub fn extract(&mut self, frame: &FrameInput) -> Result<Arc<Features>, ChainError> {
+        let (features, counts) = extract_undistorted(&mut self.orb, frame)?;
+        self.add_counts(&counts);
+        Ok(Arc::new(features))
+    }
+
+    /// Adds counts from work done outside the chain (the service's second ORB thread).
+    pub fn add_counts(&mut self, c: &ChainCounts) {
+        self.counts += *c;
+    }
+
+    /// The counts since the last call, and zero.
+    pub fn take_counts(&mut self) -> ChainCounts {
+        std::mem::take(&mut self.counts)
     }
 
     /// Locates the target of the current pair, then offers both frames to the rings.
@@ -255,7 +303,7 @@ impl VisionChain {
     ) -> Result<ChainResult, ChainError> {
         let mut timing = ChainTiming::default();
         let t = Instant::now();
-        let features = [self.extract(left.image)?, self.extract(right.image)?];
+        let features = [self.extract(left)?, self.extract(right)?];
         timing.orb_us = micros(t);
         let (left, right) = (left.meta(), right.meta());
         let mut rejections = Vec::new();
@@ -334,7 +382,18 @@ impl VisionChain {
         rejections: &mut Vec<(Uav, u64, MatchReject)>,
     ) -> Result<MatchOutcome, ChainError> {
         self.track(current);
-        let (Some(pl), Some(pr)) = (current[0].detection, current[1].detection) else {
+        // The detector works on the recorded pixels; the geometry needs the ideal
+        // pinhole ones (the keypoints were undistorted the same way).
+        let undistorted = |f: &FrameMeta| {
+            let [u, v] = f.detection?;
+            f.distortion.undistort_pixel(&f.intrinsics, u, v)
+        };
+        let (Some(pl), Some(pr)) = (undistorted(current[0]), undistorted(current[1])) else {
+            let lost = current
+                .iter()
+                .filter(|f| f.detection.is_some() && undistorted(f).is_none())
+                .count();
+            self.counts.detections_outside_lens += lost as u64;
             return Ok(MatchOutcome::NoDetection);
         };
         let detections = [pl, pr];
@@ -425,7 +484,13 @@ impl VisionChain {
         let mut past = Vec::new();
         let mut past_obs = Vec::new();
         let mut new_priors: Vec<(PriorKey, Prior)> = Vec::new();
+        let mut counts = ChainCounts::default();
         for ((uav, kf), r) in jobs.iter().zip(results) {
+            let retried = r.retried.iter().filter(|x| **x).count() as u64;
+            counts.retried_looser_ratio += retried;
+            if r.result.is_ok() {
+                counts.retry_rescued += retried;
+            }
             let t = r.timing;
             timing.matching_us += t.matching_us;
             timing.fundamental_us += t.fundamental_us;
@@ -451,6 +516,7 @@ impl VisionChain {
             }
         }
 
+        self.counts += counts;
         self.priors.extend(new_priors);
         // Forget keyframes the rings have evicted.
         let rings = &self.rings;
@@ -463,6 +529,27 @@ impl VisionChain {
             past,
         })))
     }
+}
+
+/// ORB on one frame, its keypoints then moved to their undistorted positions, with
+/// what that took (lowered FAST thresholds, keypoints the lens model dropped).
+pub fn extract_undistorted(
+    orb: &mut OrbExtractor,
+    frame: &FrameInput,
+) -> Result<(Features, ChainCounts), ChainError> {
+    let (mut features, report) = orb.extract_reported(frame.image)?;
+    let dropped = features.undistort(
+        &frame.intrinsics,
+        &frame.distortion,
+        frame.width,
+        frame.height,
+    );
+    let counts = ChainCounts {
+        fast_threshold_lowered: (report.threshold_lowered > 0) as u64,
+        keypoints_outside_lens: dropped as u64,
+        ..ChainCounts::default()
+    };
+    Ok((features, counts))
 }
 
 /// Eq. (24)–(28) for one past image: F_Ln from the current left image, F_Rn from the
@@ -483,6 +570,7 @@ fn match_past(
         result: Err(MatchReject::FundamentalFailed),
         homographies: [None, None],
         timing: ChainTiming::default(),
+        retried: [false, false],
     };
     let mut geometry: [Option<PairGeometry>; 2] = [None, None];
     let mut guided = [false, false];
@@ -490,7 +578,7 @@ fn match_past(
         // The vertical in the current camera's frame: roll and pitch only (the yaw and
         // its unknown bias turn about it).
         let up = camera_to_world(current[side].pose.attitude()).transpose() * Vector3::z();
-        let mut fit = |guide: Option<&Matrix3<f64>>, timing: &mut ChainTiming| {
+        let mut fit = |guide: Option<&Matrix3<f64>>, ratio: f32, timing: &mut ChainTiming| {
             let t = Instant::now();
             let (a, b) = match guide {
                 Some(h) => match_points_guided(
@@ -498,10 +586,10 @@ fn match_past(
                     &kf.features,
                     h,
                     config.guided_radius_px as f32,
-                    config.ratio_test,
+                    ratio,
                     neighbours,
                 ),
-                None => match_points(&features[side], &kf.features, config.ratio_test, neighbours),
+                None => match_points(&features[side], &kf.features, ratio, neighbours),
             };
             timing.matching_us += micros(t);
             let t = Instant::now();
@@ -512,11 +600,22 @@ fn match_past(
         };
         let mut result = Err(MatchReject::FundamentalFailed);
         if let Some(h) = &priors[side] {
-            result = fit(Some(h), &mut out.timing);
+            result = fit(Some(h), config.ratio_test, &mut out.timing);
             guided[side] = result.is_ok();
         }
         if result.is_err() {
-            result = fit(None, &mut out.timing);
+            result = fit(None, config.ratio_test, &mut out.timing);
+        }
+        // Too little support under the strict ratio: a scene with repeated texture
+        // (windows, lane marks) loses its good matches to the ratio test. Once more,
+        // looser; the robust fit and `min_inliers` still judge the result.
+        let starved = matches!(
+            result,
+            Err(MatchReject::TooFewMatches { .. } | MatchReject::TooFewInliers { .. })
+        );
+        if starved && config.retry_ratio_test > config.ratio_test {
+            result = fit(None, config.retry_ratio_test, &mut out.timing);
+            out.retried[side] = true;
         }
         match result {
             Ok(g) => {

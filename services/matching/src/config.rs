@@ -71,6 +71,14 @@ pub struct MatchingConfig {
     pub ring_capacity: usize,
     /// ORB features per frame.
     pub orb_features: i32,
+    /// Cells the features are spread over (0 = ORB's own ranking only): each cell keeps
+    /// its best keypoints up to an equal share of `orb_features` (`features.rs`).
+    pub orb_spread_cells: usize,
+    /// ORB detects this many times `orb_features` candidates for spreading to choose from.
+    pub orb_candidate_factor: i32,
+    /// FAST thresholds tried in turn while a frame has fewer candidates than
+    /// `orb_features` (low-texture ground); the first is ORB's usual 20.
+    pub orb_fast_thresholds: Vec<i32>,
     /// ORB pyramid levels (scale step 1.2). Few levels suit two UAVs at one altitude.
     pub orb_levels: i32,
     /// How ORB ranks its keypoints.
@@ -81,6 +89,10 @@ pub struct MatchingConfig {
     pub subpixel_keypoints: bool,
     /// Lowe's ratio test on the two nearest Hamming neighbours.
     pub ratio_test: f32,
+    /// A past image whose brute-force matching gave too few matches or inliers is
+    /// matched once more with this looser ratio (0 = no retry); counted as
+    /// `retried_looser_ratio` in matching's counters.
+    pub retry_ratio_test: f32,
     /// Guided matching: a past image matched with an earlier current frame of the same
     /// UAV less than `guided_max_age_s` ago is matched again only within this many
     /// pixels of where that pair's ground homography predicts (0 = always brute
@@ -127,10 +139,14 @@ impl Default for MatchingConfig {
             baseline_smoothing_s: 0.5,
             ring_capacity: 16,
             orb_features: 500,
+            orb_spread_cells: 48,
+            orb_candidate_factor: 4,
+            orb_fast_thresholds: vec![20, 10, 5],
             orb_levels: 3,
             orb_score: OrbScore::Fast,
             subpixel_keypoints: false,
             ratio_test: 0.8,
+            retry_ratio_test: 0.9,
             guided_radius_px: 32.0,
             guided_max_age_s: 0.5,
             fundamental: FundamentalMethod::GroundPlane,
@@ -166,6 +182,11 @@ impl MatchingConfig {
             && (1..=16).contains(&self.orb_levels)
             && self.ratio_test > 0.0
             && self.ratio_test <= 1.0
+            && (0.0..=1.0).contains(&self.retry_ratio_test)
+            && self.orb_spread_cells <= 4096
+            && (1..=16).contains(&self.orb_candidate_factor)
+            && self.orb_fast_thresholds.len() <= 8
+            && self.orb_fast_thresholds.iter().all(|t| (1..=255).contains(t))
             && (0.0..=1000.0).contains(&self.guided_radius_px)
             && (0.0..=60.0).contains(&self.guided_max_age_s)
             && self.ransac_threshold_px > 0.0

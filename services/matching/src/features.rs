@@ -5,6 +5,8 @@ use opencv::core as cv;
 use opencv::prelude::*;
 
 use crate::config::{MatchingConfig, OrbScore};
+use shared_types::conventions::Intrinsics;
+use shared_types::lens::Distortion;
 use crate::grid::PointGrid;
 use crate::hamming::{pack, Descriptor};
 
@@ -36,10 +38,44 @@ impl Features {
     }
 }
 
+impl Features {
+    /// Moves every keypoint to its undistorted position (the ideal pinhole pixel of the
+    /// same K), so epipolar geometry holds on them; keypoints the lens model cannot
+    /// invert are dropped with their descriptors. Returns how many were dropped.
+    pub fn undistort(&mut self, k: &Intrinsics, lens: &Distortion, width: u32, height: u32) -> usize {
+        if lens.is_none() {
+            return 0;
+        }
+        let before = self.points.len();
+        let mut points = Vec::with_capacity(before);
+        let mut descriptors = Vec::with_capacity(before);
+        for (p, d) in self.points.iter().zip(&self.descriptors) {
+            if let Some([u, v]) = lens.undistort_pixel(k, p.x as f64, p.y as f64) {
+                points.push(cv::Point2f::new(u as f32, v as f32));
+                descriptors.push(*d);
+            }
+        }
+        *self = Features::new(points, descriptors, width, height);
+        before - self.points.len()
+    }
+}
+
 pub struct OrbExtractor {
     orb: cv::Ptr<opencv::features2d::ORB>,
     gray: cv::Mat,
     subpixel: bool,
+    budget: usize,
+    spread_cells: usize,
+    fast_thresholds: Vec<i32>,
+}
+
+/// What one extraction did beyond the plain ORB call (matching's counters).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct ExtractReport {
+    /// FAST candidates before spreading.
+    pub candidates: usize,
+    /// Times the FAST threshold was lowered because the frame had too few corners.
+    pub threshold_lowered: usize,
 }
 
 impl OrbExtractor {
@@ -47,14 +83,35 @@ impl OrbExtractor {
     /// `orb_levels` pyramid levels (scale 1.2), refined with `cornerSubPix` when
     /// `subpixel_keypoints` (ORB keypoints sit on a level's integer grid:
     /// ±1.2^level/2 px).
+    ///
+    /// With `orb_spread_cells > 0` the features are spread over the image: ORB detects
+    /// `orb_candidate_factor` × the budget, the image is cut into about
+    /// `orb_spread_cells` cells, and each cell keeps its best keypoints up to an equal
+    /// share of the budget; the share cells could not use goes to the best of the rest.
+    /// Without it, a frame whose roofs and facades are busier than its ground gives
+    /// nearly all its features to the buildings, and the ground plane (the geometry
+    /// matching relies on) starves. A frame with fewer candidates than the budget is
+    /// detected again at lower FAST thresholds (`orb_fast_thresholds`): the open,
+    /// low-texture scenes.
     pub fn new(config: &MatchingConfig) -> opencv::Result<Self> {
         let score = match config.orb_score {
             OrbScore::Fast => opencv::features2d::ORB_ScoreType::FAST_SCORE,
             OrbScore::Harris => opencv::features2d::ORB_ScoreType::HARRIS_SCORE,
         };
+        let spread = config.orb_spread_cells > 0;
+        let factor = if spread {
+            config.orb_candidate_factor.max(1)
+        } else {
+            1
+        };
+        let thresholds = if config.orb_fast_thresholds.is_empty() {
+            vec![20]
+        } else {
+            config.orb_fast_thresholds.clone()
+        };
         Ok(Self {
             orb: opencv::features2d::ORB::create(
-                config.orb_features,
+                config.orb_features.saturating_mul(factor),
                 1.2,
                 config.orb_levels,
                 31,
@@ -62,25 +119,46 @@ impl OrbExtractor {
                 2,
                 score,
                 31,
-                20,
+                thresholds[0],
             )?,
             gray: cv::Mat::default(),
             subpixel: config.subpixel_keypoints,
+            budget: config.orb_features.max(0) as usize,
+            spread_cells: config.orb_spread_cells,
+            fast_thresholds: thresholds,
         })
     }
 
     /// ORB on a BGR or grey frame.
     pub fn extract(&mut self, frame: &cv::Mat) -> opencv::Result<Features> {
+        self.extract_reported(frame).map(|(f, _)| f)
+    }
+
+    /// [`OrbExtractor::extract`], and what it had to do.
+    pub fn extract_reported(&mut self, frame: &cv::Mat) -> opencv::Result<(Features, ExtractReport)> {
         let gray = if frame.channels() == 3 {
             opencv::imgproc::cvt_color_def(frame, &mut self.gray, opencv::imgproc::COLOR_BGR2GRAY)?;
             &self.gray
         } else {
             frame
         };
+        let mut report = ExtractReport::default();
         let mut keypoints = cv::Vector::<cv::KeyPoint>::new();
+        for (i, &threshold) in self.fast_thresholds.iter().enumerate() {
+            self.orb.set_fast_threshold(threshold)?;
+            self.orb.detect_def(gray, &mut keypoints)?;
+            let last = i + 1 == self.fast_thresholds.len();
+            if keypoints.len() >= self.budget || last {
+                break;
+            }
+            report.threshold_lowered += 1;
+        }
+        report.candidates = keypoints.len();
+        if self.spread_cells > 0 && keypoints.len() > self.budget {
+            keypoints = spread(&keypoints, self.budget, self.spread_cells, gray.cols(), gray.rows());
+        }
         let mut descriptors = cv::Mat::default();
-        self.orb
-            .detect_and_compute_def(gray, &cv::no_array(), &mut keypoints, &mut descriptors)?;
+        self.orb.compute(gray, &mut keypoints, &mut descriptors)?;
         let mut points: cv::Vector<cv::Point2f> = keypoints.iter().map(|k| k.pt()).collect();
         if self.subpixel && !points.is_empty() {
             let criteria =
@@ -100,11 +178,105 @@ impl OrbExtractor {
                 opencv::Error::new(cv::StsBadSize, "ORB descriptor is not 32 bytes")
             })?);
         }
-        Ok(Features::new(
+        let features = Features::new(
             points.to_vec(),
             packed,
             gray.cols().max(0) as u32,
             gray.rows().max(0) as u32,
-        ))
+        );
+        Ok((features, report))
+    }
+}
+
+/// Keeps `budget` of `keypoints` spread over a grid of about `cells` cells of a
+/// `width` × `height` image: each cell its best (by response) up to an equal share, then
+/// the best of the rest until the budget is spent. Deterministic: ties keep ORB's order.
+pub fn spread(
+    keypoints: &cv::Vector<cv::KeyPoint>,
+    budget: usize,
+    cells: usize,
+    width: i32,
+    height: i32,
+) -> cv::Vector<cv::KeyPoint> {
+    let (w, h) = (width.max(1) as f64, height.max(1) as f64);
+    let cols = ((cells as f64 * w / h).sqrt().round() as usize).max(1);
+    let rows = (cells / cols).max(1);
+    let cell_of = |k: &cv::KeyPoint| {
+        let p = k.pt();
+        let c = ((p.x as f64 / w * cols as f64) as usize).min(cols - 1);
+        let r = ((p.y as f64 / h * rows as f64) as usize).min(rows - 1);
+        r * cols + c
+    };
+    let mut order: Vec<usize> = (0..keypoints.len()).collect();
+    let response: Vec<f32> = keypoints.iter().map(|k| k.response()).collect();
+    order.sort_by(|&a, &b| response[b].total_cmp(&response[a]));
+    let share = budget.div_ceil(cols * rows);
+    let mut used = vec![0usize; cols * rows];
+    let mut keep = vec![false; keypoints.len()];
+    let mut kept = 0;
+    for &i in &order {
+        if kept == budget {
+            break;
+        }
+        let Ok(k) = keypoints.get(i) else { continue };
+        let c = cell_of(&k);
+        if used[c] < share {
+            used[c] += 1;
+            keep[i] = true;
+            kept += 1;
+        }
+    }
+    for &i in &order {
+        if kept == budget {
+            break;
+        }
+        if !keep[i] {
+            keep[i] = true;
+            kept += 1;
+        }
+    }
+    keypoints
+        .iter()
+        .zip(keep)
+        .filter_map(|(k, kept)| kept.then_some(k))
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn keypoint(x: f32, y: f32, response: f32) -> cv::KeyPoint {
+        cv::KeyPoint::new_coords(x, y, 31.0, -1.0, response, 0, -1).unwrap()
+    }
+
+    #[test]
+    fn spreading_gives_the_quiet_half_its_share() {
+        // 400 strong corners in the left half (a busy roof), 100 weak ones in the right
+        // half (the ground).
+        let mut all = cv::Vector::<cv::KeyPoint>::new();
+        for i in 0..400 {
+            all.push(keypoint((i % 20) as f32 * 15.0, (i / 20) as f32 * 23.0, 100.0 + i as f32));
+        }
+        for i in 0..100 {
+            all.push(keypoint(330.0 + (i % 10) as f32 * 30.0, (i / 10) as f32 * 47.0, 10.0));
+        }
+        let kept = spread(&all, 200, 48, 640, 480);
+        assert_eq!(kept.len(), 200);
+        let right = kept.iter().filter(|k| k.pt().x >= 320.0).count();
+        // By response alone the right half would get none.
+        assert!(right >= 80, "right half kept {right}");
+    }
+
+    #[test]
+    fn spreading_fills_the_budget_from_the_best_when_cells_run_dry() {
+        let mut all = cv::Vector::<cv::KeyPoint>::new();
+        for i in 0..300 {
+            all.push(keypoint(5.0 + (i % 10) as f32, 5.0 + (i / 10) as f32, i as f32));
+        }
+        let kept = spread(&all, 100, 48, 640, 480);
+        assert_eq!(kept.len(), 100);
+        let weakest = kept.iter().map(|k| k.response()).fold(f32::INFINITY, f32::min);
+        assert!(weakest >= 200.0, "kept a weak one: {weakest}");
     }
 }

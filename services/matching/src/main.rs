@@ -12,16 +12,22 @@
 //! `compute` (orb + match of one pair). Counters: `frames`, `pairs`, `sets`,
 //! `frames_lost` (sequence gaps), `frames_dropped`, `no_detection`, `warming_up`,
 //! `past_rejected.<reason>`, `essential_fallback` (past images whose F came from the
-//! 5-point E because the dominant plane was not level).
+//! 5-point E because the dominant plane was not level), and the adaptations of
+//! [`matching::ChainCounts`]: `retried_looser_ratio`, `retry_rescued`,
+//! `fast_threshold_lowered`, `keypoints_outside_lens`, `detections_outside_lens`.
 
 use anyhow::{Context, Result};
 use clap::Parser;
 use detection::frame_view::frame_mat;
 use geolocation::EstimatorConfig;
 use matching::features::{Features, OrbExtractor};
-use matching::{FrameMeta, MatchOutcome, MatchingConfig, VisionChain};
+use matching::{
+    extract_undistorted, ChainCounts, FrameInput, FrameMeta, MatchOutcome, MatchingConfig,
+    VisionChain,
+};
 use shared_types::clock::{elapsed_us, monotonic_ns};
 use shared_types::conventions::{Intrinsics, Uav};
+use shared_types::lens::Distortion;
 use shared_types::messages::{DetectionMsg, FrameHeader, ObservationSetMsg, MAX_OBSERVATIONS};
 use shared_types::service_names::Topic;
 use shared_types::shell::{init_tracing, load_section, serve, SeqGaps, ServiceArgs, Wake};
@@ -58,6 +64,25 @@ struct Matcher {
     gaps: [SeqGaps; 2],
 }
 
+/// Features of the left frame from the second ORB thread, with its counts.
+type LeftFeatures = (FrameHeader, Arc<Features>, ChainCounts);
+
+/// A frame's pixels with what its header says (no detection yet: ORB does not need it).
+fn input<'a>(header: &FrameHeader, mat: &'a opencv::core::Mat) -> FrameInput<'a> {
+    let [fx, fy, cx, cy] = header.intrinsics;
+    FrameInput {
+        seq: header.seq,
+        t_s: header.t_s,
+        pose: header.pose,
+        image: mat,
+        detection: None,
+        intrinsics: Intrinsics::new(fx, fy, cx, cy),
+        distortion: Distortion(header.distortion),
+        width: header.width,
+        height: header.height,
+    }
+}
+
 fn meta(header: &FrameHeader, detection: &DetectionMsg) -> FrameMeta {
     let [fx, fy, cx, cy] = header.intrinsics;
     FrameMeta {
@@ -66,6 +91,7 @@ fn meta(header: &FrameHeader, detection: &DetectionMsg) -> FrameMeta {
         pose: header.pose,
         detection: (detection.found == 1).then_some(detection.centre),
         intrinsics: Intrinsics::new(fx, fy, cx, cy),
+        distortion: Distortion(header.distortion),
         width: header.width,
         height: header.height,
     }
@@ -110,16 +136,16 @@ impl Matcher {
                     return Ok(None);
                 };
                 let mat = frame_mat(&header, payload)?;
-                Ok(Some((header, chain.extract(&mat)?)))
+                Ok(Some((header, chain.extract(&input(&header, &mat))?)))
             };
-        let extract_left =
-            |orb: &mut OrbExtractor| -> Result<Option<(FrameHeader, Arc<Features>)>> {
-                let Some((header, payload)) = left else {
-                    return Ok(None);
-                };
-                let mat = frame_mat(&header, payload)?;
-                Ok(Some((header, Arc::new(orb.extract(&mat)?))))
+        let extract_left = |orb: &mut OrbExtractor| -> Result<Option<LeftFeatures>> {
+            let Some((header, payload)) = left else {
+                return Ok(None);
             };
+            let mat = frame_mat(&header, payload)?;
+            let (features, counts) = extract_undistorted(orb, &input(&header, &mat))?;
+            Ok(Some((header, Arc::new(features), counts)))
+        };
         // Left on a second thread, right on this one.
         let (l, r) = if left.is_some() && right.is_some() {
             crossbeam::thread::scope(|scope| {
@@ -136,6 +162,12 @@ impl Matcher {
         };
         drop(newest);
         let orb_us = elapsed_us(start, monotonic_ns());
+        let l = l.map(|found| {
+            found.map(|(header, features, counts)| {
+                self.chain.add_counts(&counts);
+                (header, features)
+            })
+        });
         for (uav, result) in [l, r].into_iter().enumerate() {
             match result {
                 Ok(Some((header, features))) => {
@@ -209,6 +241,18 @@ impl Matcher {
         for (_, _, reason) in &rejections {
             self.stats
                 .count(&format!("past_rejected.{}", reason.kind()), 1);
+        }
+        let c = self.chain.take_counts();
+        for (name, n) in [
+            ("retried_looser_ratio", c.retried_looser_ratio),
+            ("retry_rescued", c.retry_rescued),
+            ("fast_threshold_lowered", c.fast_threshold_lowered),
+            ("keypoints_outside_lens", c.keypoints_outside_lens),
+            ("detections_outside_lens", c.detections_outside_lens),
+        ] {
+            if n > 0 {
+                self.stats.count(name, n);
+            }
         }
         let set = match outcome {
             MatchOutcome::NoDetection => {

@@ -50,6 +50,7 @@ fn epipolar_transfer_lands_on_the_current_target_in_past_images() {
                 image,
                 detection: detector.detect(image).unwrap().map(|d| d.centre),
                 intrinsics: sim.intrinsics(),
+                distortion: sim.distortion(),
                 width: w as u32,
                 height: h as u32,
             });

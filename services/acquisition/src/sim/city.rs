@@ -20,6 +20,17 @@ pub struct CityConfig {
     /// Ground altitude (ENU z), metres.
     pub ground_z_m: f64,
     pub ground_metres_per_texel: f64,
+    /// Height range of the buildings on a block's outer lots, metres.
+    pub height_m: [f64; 2],
+    /// Height range of the building on a block's central lot, metres.
+    pub central_height_m: [f64; 2],
+    /// Share of lots left empty (yards, car parks, fields).
+    pub empty_lot_share: f64,
+    /// Contrast of the procedural textures about their mean (1 = as designed; below 1
+    /// a washed-out, low-texture scene for ORB).
+    pub texture_contrast: f64,
+    /// Scale of a `roof_image` photograph tiled over the roofs, metres per pixel.
+    pub roof_image_metres_per_pixel: f64,
 }
 
 impl Default for CityConfig {
@@ -32,7 +43,32 @@ impl Default for CityConfig {
             sidewalk_m: 4.0,
             ground_z_m: 12.0,
             ground_metres_per_texel: 0.2,
+            height_m: [5.0, 25.0],
+            central_height_m: [15.0, 40.0],
+            empty_lot_share: 0.15,
+            texture_contrast: 1.0,
+            roof_image_metres_per_pixel: 0.1,
         }
+    }
+}
+
+impl CityConfig {
+    /// Checks the layout knobs (the dimensions are checked by the scenario).
+    pub fn validate_layout(&self) -> Result<(), String> {
+        let range_ok = |r: [f64; 2]| r[0].is_finite() && r[1].is_finite() && r[0] > 0.0 && r[1] >= r[0];
+        if !range_ok(self.height_m) || !range_ok(self.central_height_m) {
+            return Err("city height_m and central_height_m must be [min, max] with 0 < min <= max".into());
+        }
+        if !(0.0..=1.0).contains(&self.empty_lot_share) {
+            return Err("city empty_lot_share must be within 0..=1".into());
+        }
+        if !(self.texture_contrast.is_finite() && (0.0..=4.0).contains(&self.texture_contrast)) {
+            return Err("city texture_contrast must be within 0..=4".into());
+        }
+        if !(self.roof_image_metres_per_pixel.is_finite() && self.roof_image_metres_per_pixel > 0.0) {
+            return Err("city roof_image_metres_per_pixel must be > 0".into());
+        }
+        Ok(())
     }
 }
 
@@ -46,6 +82,29 @@ pub struct Building {
     pub tint: [f32; 3],
     /// Offset into the shared roof/facade textures so buildings do not look alike.
     pub texture_offset: [f64; 2],
+    /// False for a deck on pillars (a bridge, a canopy): only its top is drawn, and what
+    /// is below it is hidden from above but not from the side.
+    pub walls: bool,
+}
+
+/// An overpass, canopy or dense tree crown over the road: a flat deck at `height_m`
+/// covering `[centre ± size/2]`, under which the target disappears from both UAVs.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Occluder {
+    pub centre: [f64; 2],
+    pub size: [f64; 2],
+    pub height_m: f64,
+}
+
+impl Occluder {
+    pub fn is_valid(&self) -> bool {
+        let finite = self.centre.iter().chain(&self.size).all(|v| v.is_finite());
+        finite
+            && self.size.iter().all(|s| *s > 0.0)
+            && self.height_m.is_finite()
+            && self.height_m > 0.0
+    }
 }
 
 pub struct City {
@@ -61,14 +120,38 @@ pub struct City {
 impl City {
     pub fn generate(config: CityConfig) -> Self {
         let buildings = layout_buildings(&config);
+        let contrast = config.texture_contrast;
         Self {
             tallest_m: buildings.iter().map(|b| b.height_m).fold(0.0, f64::max),
-            ground: ground_texture(&config, &buildings),
-            roof: roof_texture(config.seed),
-            facade: facade_texture(config.seed),
+            ground: ground_texture(&config, &buildings).with_contrast(contrast),
+            roof: roof_texture(config.seed).with_contrast(contrast),
+            facade: facade_texture(config.seed).with_contrast(contrast),
             buildings,
             config,
         }
+    }
+
+    /// Adds decks over the scene (after the textures: nothing is painted under them).
+    pub fn with_occluders(mut self, occluders: &[Occluder]) -> Self {
+        for o in occluders {
+            let half = [o.size[0] / 2.0, o.size[1] / 2.0];
+            self.buildings.push(Building {
+                min: [o.centre[0] - half[0], o.centre[1] - half[1]],
+                max: [o.centre[0] + half[0], o.centre[1] + half[1]],
+                height_m: o.height_m,
+                tint: [0.8, 0.85, 0.8],
+                texture_offset: [o.centre[0], o.centre[1]],
+                walls: false,
+            });
+            self.tallest_m = self.tallest_m.max(o.height_m);
+        }
+        self
+    }
+
+    /// Replaces the procedural roof texture by a photograph (BGR8), tiled.
+    pub fn with_roof_image(mut self, width: usize, height: usize, bgr: Vec<u8>) -> Self {
+        self.roof = Texture::from_bgr(width, height, self.config.roof_image_metres_per_pixel, bgr);
+        self
     }
 
     /// Replaces the procedural ground by a user orthophoto (BGR8) covering the map.
@@ -132,7 +215,7 @@ fn layout_buildings(c: &CityConfig) -> Vec<Building> {
             let ys = split(next());
             for li in 0..3 {
                 for lj in 0..3 {
-                    if next() < 0.15 {
+                    if next() < c.empty_lot_share {
                         continue; // a yard or a car park
                     }
                     let centre = li == 1 && lj == 1;
@@ -145,11 +228,12 @@ fn layout_buildings(c: &CityConfig) -> Vec<Building> {
                     if max[0] - min[0] < 4.0 || max[1] - min[1] < 4.0 {
                         continue;
                     }
-                    let height_m = if centre {
-                        15.0 + 25.0 * next()
+                    let [lo, hi] = if centre {
+                        c.central_height_m
                     } else {
-                        5.0 + 20.0 * next()
+                        c.height_m
                     };
+                    let height_m = lo + (hi - lo) * next();
                     let grey = 0.75 + 0.35 * next() as f32;
                     let warm = 0.12 * next() as f32;
                     out.push(Building {
@@ -158,6 +242,7 @@ fn layout_buildings(c: &CityConfig) -> Vec<Building> {
                         height_m,
                         tint: [grey * (1.0 - warm), grey, grey * (1.0 + warm)],
                         texture_offset: [400.0 * next(), 400.0 * next()],
+                        walls: true,
                     });
                 }
             }

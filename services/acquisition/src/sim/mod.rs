@@ -6,6 +6,8 @@
 //! it frame by frame and render straight into their own buffers.
 
 pub mod city;
+pub mod degrade;
+pub mod lens;
 pub mod motion;
 pub mod record;
 pub mod render;

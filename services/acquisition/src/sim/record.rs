@@ -33,7 +33,7 @@ pub fn record(
         fy: k.fy,
         cx: k.cx,
         cy: k.cy,
-        distortion: [0.0; 5],
+        distortion: config.camera.distortion,
     };
     let meta = RecordingMeta::new(name, config.frame_rate_hz, camera, config.origin);
     let mut writer = RecordingWriter::create(out, &meta, true)?;

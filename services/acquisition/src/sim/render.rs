@@ -209,7 +209,7 @@ impl Renderer {
                 ([x0, y1], [x0, y0], Vector3::new(-1.0, 0.0, 0.0)),
             ];
             for (a, e, n) in walls {
-                if n.dot(&(cam - p(a[0], a[1], zg))) <= 0.0 {
+                if !b.walls || n.dot(&(cam - p(a[0], a[1], zg))) <= 0.0 {
                     continue;
                 }
                 let len = ((e[0] - a[0]).powi(2) + (e[1] - a[1]).powi(2)).sqrt();

@@ -1,7 +1,8 @@
 //! Simulator configuration and the presets file (`presets/scenarios.toml`, built in;
 //! users pass their own copy with `--presets`).
 
-use super::city::CityConfig;
+use super::city::{CityConfig, Occluder};
+use super::degrade::ImageEffects;
 use super::motion::{DrivingSpec, FlightSpec};
 use super::SimError;
 use crate::recording::Origin;
@@ -37,6 +38,16 @@ pub struct SimConfig {
     /// procedural texture.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub ground_image: Option<PathBuf>,
+    /// Optional photograph (PNG/JPEG) tiled over every roof instead of the procedural
+    /// roof texture, at `roof_metres_per_pixel`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub roof_image: Option<PathBuf>,
+    /// Decks (bridges, canopies) the target drives under and disappears.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub occluders: Vec<Occluder>,
+    /// What the camera does to the image after the lens (all off by default).
+    #[serde(default, skip_serializing_if = "ImageEffects::is_identity")]
+    pub image: ImageEffects,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -45,6 +56,14 @@ pub struct SimCamera {
     pub width: u32,
     pub height: u32,
     pub hfov_deg: f64,
+    /// OpenCV's k1, k2, p1, p2, k3, rendered into the pixels (zeros = a pinhole). The
+    /// recording carries it as `distortion`, the live source in each frame's header.
+    #[serde(default, skip_serializing_if = "is_pinhole")]
+    pub distortion: [f64; 5],
+}
+
+fn is_pinhole(d: &[f64; 5]) -> bool {
+    d.iter().all(|c| *c == 0.0)
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -73,6 +92,16 @@ impl SimConfig {
         let hfov_ok = c.hfov_deg > 5.0 && c.hfov_deg < 150.0;
         if !hfov_ok {
             return bad(format!("camera hfov_deg {} outside (5, 150)", c.hfov_deg));
+        }
+        if !c.distortion.iter().all(|k| k.is_finite() && k.abs() < 10.0) {
+            return bad(format!(
+                "camera distortion {:?} must be finite and within ±10",
+                c.distortion
+            ));
+        }
+        self.image.validate()?;
+        if !self.occluders.iter().all(Occluder::is_valid) {
+            return bad("occluders need finite centres, sizes > 0 and height_m > 0".into());
         }
         let f = &self.flight;
         let flight_ok = positive(f.altitude_agl_m)
@@ -103,6 +132,7 @@ impl SimConfig {
         if !city_ok {
             return bad("city dimensions must be finite and > 0".into());
         }
+        city.validate_layout().map_err(SimError::Config)?;
         if (2.0 * city.half_extent_m / city.ground_metres_per_texel) > 8192.0 {
             return bad("city ground texture would exceed 8192 texels a side: raise ground_metres_per_texel".into());
         }

@@ -3,7 +3,8 @@
 
 use super::city::City;
 use super::motion::{Motion, Route, TrueState};
-use super::render::{CameraView, Renderer, VehicleBox};
+use super::lens::LensMap;
+use super::render::{CameraView, Renderer, Surface, VehicleBox};
 use super::scenario::SimConfig;
 use super::SimError;
 use nalgebra::Point3;
@@ -12,6 +13,7 @@ use rand::rngs::StdRng;
 use rand::SeedableRng;
 use rand_distr::{Distribution, Normal};
 use shared_types::conventions::{camera_to_world, wrap_angle, Attitude, Intrinsics, Uav};
+use shared_types::lens::Distortion;
 use shared_types::messages::PoseSample;
 use std::sync::Arc;
 
@@ -48,30 +50,22 @@ pub struct Simulator {
     intrinsics: Intrinsics,
     seq: u64,
     renderers: [Renderer; 2],
+    /// A distorted camera's resampling map, with each UAV's pinhole canvas.
+    lens: Option<(Arc<LensMap>, [Vec<u8>; 2])>,
 }
 
 impl Simulator {
     /// Builds the town (or loads the orthophoto) and places everything at t = 0.
     pub fn new(config: SimConfig) -> Result<Self, SimError> {
         config.validate()?;
-        let mut city = City::generate(config.city);
+        let mut city = City::generate(config.city).with_occluders(&config.occluders);
         if let Some(path) = &config.ground_image {
-            let img = opencv::imgcodecs::imread(path.as_os_str(), opencv::imgcodecs::IMREAD_COLOR)
-                .map_err(|e| SimError::GroundImage {
-                    path: path.clone(),
-                    reason: e.message,
-                })?;
-            if img.empty() {
-                return Err(SimError::GroundImage {
-                    path: path.clone(),
-                    reason: "cannot be read as an image".into(),
-                });
-            }
-            let bytes = img.data_bytes().map_err(|e| SimError::GroundImage {
-                path: path.clone(),
-                reason: e.message,
-            })?;
-            city = city.with_ground_image(img.cols() as usize, img.rows() as usize, bytes.to_vec());
+            let (w, h, bgr) = read_photo(path)?;
+            city = city.with_ground_image(w, h, bgr);
+        }
+        if let Some(path) = &config.roof_image {
+            let (w, h, bgr) = read_photo(path)?;
+            city = city.with_roof_image(w, h, bgr);
         }
         Self::with_city(config, Arc::new(city))
     }
@@ -92,7 +86,17 @@ impl Simulator {
         let normal = |s: f64| (s > 0.0).then(|| Normal::new(0.0, s).ok()).flatten();
         let [px, py, pz] = config.noise.sigma_position_m;
         let [ay, ap, ar] = config.noise.sigma_attitude_deg;
+        let intrinsics = Intrinsics::from_hfov(c.width, c.height, c.hfov_deg);
+        let lens = Distortion(c.distortion);
+        let lens = if lens.is_none() {
+            None
+        } else {
+            let map = LensMap::new(&intrinsics, &lens, c.width, c.height)?;
+            let size = 3 * map.canvas[0] * map.canvas[1];
+            Some((Arc::new(map), [vec![0u8; size], vec![0u8; size]]))
+        };
         Ok(Self {
+            lens,
             intrinsics: Intrinsics::from_hfov(c.width, c.height, c.hfov_deg),
             rng: StdRng::seed_from_u64(config.seed),
             noise: [
@@ -121,6 +125,11 @@ impl Simulator {
 
     pub fn intrinsics(&self) -> Intrinsics {
         self.intrinsics
+    }
+
+    /// The lens distortion rendered into the pixels (zeros = pinhole).
+    pub fn distortion(&self) -> Distortion {
+        Distortion(self.config.camera.distortion)
     }
 
     /// Frames per UAV this run will produce.
@@ -174,8 +183,10 @@ impl Simulator {
             roll + noise[5].to_radians(),
         );
         let (w, h) = (view.width as f64, view.height as f64);
+        let lens = self.distortion();
         let target_px = view
             .project(&target)
+            .map(|[u, v]| lens.distort_pixel(&view.intrinsics, u, v))
             .filter(|p| p[0] >= 0.0 && p[1] >= 0.0 && p[0] <= w - 1.0 && p[1] <= h - 1.0);
         SimFrame {
             uav,
@@ -189,16 +200,22 @@ impl Simulator {
         }
     }
 
-    /// Renders one UAV's view of `step` as BGR8 into `out` (rows of `stride` bytes).
+    /// Renders one UAV's view of `step` as BGR8 into `out` (rows of `stride` bytes):
+    /// the pinhole image, through the lens when the camera has distortion, then the
+    /// preset's image effects.
     pub fn render(&mut self, step: &SimStep, uav: Uav, out: &mut [u8], stride: usize) {
-        let frame = &step.frames[uav.index()];
-        self.renderers[uav.index()].render(
+        let i = uav.index();
+        let canvas = self.lens.as_mut().map(|(map, c)| (map.clone(), &mut c[i]));
+        render_view(
+            &mut self.renderers[i],
             &self.city,
-            Some(&step.vehicle),
-            &frame.view,
+            step,
+            uav,
+            canvas,
             out,
             stride,
         );
+        self.degrade(step, uav, out, stride);
     }
 
     /// Renders both views of `step`, one thread each.
@@ -211,29 +228,167 @@ impl Simulator {
     ) {
         let city = &self.city;
         let [rl, rr] = &mut self.renderers;
+        let (cl, cr) = match self.lens.as_mut() {
+            Some((map, [cl, cr])) => (Some((map.clone(), cl)), Some((map.clone(), cr))),
+            None => (None, None),
+        };
         std::thread::scope(|s| {
-            s.spawn(|| {
-                rl.render(
-                    city,
-                    Some(&step.vehicle),
-                    &step.frames[0].view,
-                    left,
-                    stride,
-                )
-            });
-            rr.render(
-                city,
-                Some(&step.vehicle),
-                &step.frames[1].view,
-                right,
-                stride,
-            );
+            s.spawn(|| render_view(rl, city, step, Uav::Left, cl, left, stride));
+            render_view(rr, city, step, Uav::Right, cr, right, stride);
         });
+        self.degrade(step, Uav::Left, left, stride);
+        self.degrade(step, Uav::Right, right, stride);
+    }
+
+    fn degrade(&self, step: &SimStep, uav: Uav, out: &mut [u8], stride: usize) {
+        let c = &self.config;
+        let frame = &step.frames[uav.index()];
+        let seed = c.seed ^ (frame.seq << 1) ^ uav.index() as u64;
+        let (w, h) = (c.camera.width as usize, c.camera.height as usize);
+        if let Err(e) = c.image.apply(uav.index(), seed, out, w, h, stride) {
+            // Only an OpenCV failure gets here (the effects were validated): the frame
+            // stays as rendered rather than the source stopping.
+            tracing::warn!(?uav, "image effects not applied: {e}");
+        }
+    }
+
+    /// Whether the target point is seen in `uav`'s last rendered image: inside it and
+    /// not hidden (the pixel at its undistorted projection shows the vehicle's top).
+    /// Truth, for scoring only.
+    pub fn target_visible(&self, step: &SimStep, uav: Uav) -> bool {
+        let frame = &step.frames[uav.index()];
+        if frame.target_px.is_none() {
+            return false;
+        }
+        let Some([u, v]) = frame.view.project(&Point3::from(frame.target)) else {
+            return false;
+        };
+        let (u, v, w, h) = match &self.lens {
+            Some((map, _)) => (
+                u + map.margin[0] as f64,
+                v + map.margin[1] as f64,
+                map.canvas[0],
+                map.canvas[1],
+            ),
+            None => (u, v, frame.view.width as usize, frame.view.height as usize),
+        };
+        let (u, v) = (u.round(), v.round());
+        if u < 0.0 || v < 0.0 || u as usize >= w || v as usize >= h {
+            return false;
+        }
+        self.renderers[uav.index()].surface(u as usize, v as usize) == Surface::VehicleTop
     }
 
     /// The renderer that drew `uav`'s last image (its per-pixel surface labels).
     pub fn renderer(&self, uav: Uav) -> &Renderer {
         &self.renderers[uav.index()]
+    }
+}
+
+/// Renders `uav`'s view of `step`: straight into `out`, or into the pinhole canvas and
+/// then through the lens map.
+fn render_view(
+    renderer: &mut Renderer,
+    city: &City,
+    step: &SimStep,
+    uav: Uav,
+    canvas: Option<(Arc<LensMap>, &mut Vec<u8>)>,
+    out: &mut [u8],
+    stride: usize,
+) {
+    let view = &step.frames[uav.index()].view;
+    match canvas {
+        None => renderer.render(city, Some(&step.vehicle), view, out, stride),
+        Some((map, pixels)) => {
+            let canvas_view = CameraView {
+                intrinsics: map.canvas_intrinsics(&view.intrinsics),
+                width: map.canvas[0] as u32,
+                height: map.canvas[1] as u32,
+                ..*view
+            };
+            renderer.render(city, Some(&step.vehicle), &canvas_view, pixels, 3 * map.canvas[0]);
+            map.resample(pixels, out, stride);
+        }
+    }
+}
+
+/// A photograph (ground or roof texture) as BGR8. Aerial imagery often comes as 11- or
+/// 16-bit and panchromatic: such an image is stretched to 8 bits between its 1st and
+/// 99th percentiles, and grey becomes BGR.
+fn read_photo(path: &std::path::Path) -> Result<(usize, usize, Vec<u8>), SimError> {
+    let resolved = resolve_data_path(path);
+    let err = |reason: String| SimError::GroundImage {
+        path: resolved.clone(),
+        reason,
+    };
+    let flags = opencv::imgcodecs::IMREAD_ANYDEPTH | opencv::imgcodecs::IMREAD_ANYCOLOR;
+    let img = opencv::imgcodecs::imread(resolved.as_os_str(), flags).map_err(|e| err(e.message))?;
+    if img.empty() {
+        return Err(err(format!(
+            "cannot be read as an image{}",
+            if resolved.exists() {
+                ""
+            } else {
+                " (missing: the built-in photo scenes need `bash scripts/setup.sh`, which fetches data/aerial/)"
+            }
+        )));
+    }
+    let bgr = photo_to_bgr8(&img).map_err(|e| err(e.message))?;
+    let bytes = bgr.data_bytes().map_err(|e| err(e.message))?;
+    Ok((bgr.cols() as usize, bgr.rows() as usize, bytes.to_vec()))
+}
+
+/// Any depth, 1/3/4 channels → BGR8 (percentile stretch for deeper than 8 bits).
+fn photo_to_bgr8(img: &opencv::core::Mat) -> opencv::Result<opencv::core::Mat> {
+    use opencv::core as cv;
+    let mut eight = img.clone();
+    if img.depth() != cv::CV_8U {
+        let mut single = cv::Mat::default();
+        img.convert_to(&mut single, cv::CV_32F, 1.0, 0.0)?;
+        let mut values: Vec<f32> = single.reshape(1, 0)?.data_typed::<f32>()?.to_vec();
+        values.retain(|v| v.is_finite());
+        values.sort_by(f32::total_cmp);
+        let at = |q: f64| values.get(((values.len() as f64 - 1.0) * q) as usize).copied();
+        let (lo, hi) = (at(0.01).unwrap_or(0.0), at(0.99).unwrap_or(1.0));
+        let scale = 255.0 / f64::from((hi - lo).max(1e-6));
+        single.convert_to(&mut eight, cv::CV_8U, scale, -f64::from(lo) * scale)?;
+    }
+    let code = match eight.channels() {
+        1 => Some(opencv::imgproc::COLOR_GRAY2BGR),
+        4 => Some(opencv::imgproc::COLOR_BGRA2BGR),
+        _ => None,
+    };
+    match code {
+        Some(code) => {
+            let mut bgr = cv::Mat::default();
+            opencv::imgproc::cvt_color_def(&eight, &mut bgr, code)?;
+            Ok(bgr)
+        }
+        None => Ok(eight),
+    }
+}
+
+/// A preset's image path: as given when it exists (absolute, or relative to the
+/// working directory); else under `$DUALGEO_DATA_DIR`; else under the source tree's
+/// `data/` (where `scripts/setup.sh` puts the suite's aerial photographs), for a path
+/// starting with `data/`.
+pub fn resolve_data_path(path: &std::path::Path) -> std::path::PathBuf {
+    if path.is_absolute() || path.exists() {
+        return path.to_path_buf();
+    }
+    let relative = path.strip_prefix("data").unwrap_or(path);
+    if let Some(dir) = std::env::var_os("DUALGEO_DATA_DIR") {
+        let p = std::path::Path::new(&dir).join(relative);
+        if p.exists() {
+            return p;
+        }
+    }
+    let tree = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../data");
+    let p = tree.join(relative);
+    if p.exists() {
+        p
+    } else {
+        path.to_path_buf()
     }
 }
 

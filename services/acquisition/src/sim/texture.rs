@@ -53,6 +53,22 @@ impl Texture {
         }
     }
 
+    /// The texture with its contrast about each channel's mean scaled by `k` (1 = as is).
+    pub fn with_contrast(mut self, k: f64) -> Self {
+        if k == 1.0 || self.data.is_empty() {
+            return self;
+        }
+        let texels = (self.data.len() / 3) as f64;
+        let mean: [f64; 3] = std::array::from_fn(|c| {
+            self.data.iter().skip(c).step_by(3).map(|v| *v as f64).sum::<f64>() / texels
+        });
+        for (i, v) in self.data.iter_mut().enumerate() {
+            let m = mean[i % 3];
+            *v = clamp_u8(m + k * (*v as f64 - m));
+        }
+        self
+    }
+
     pub fn texel_mut(&mut self, col: usize, row: usize) -> &mut [u8] {
         let i = (row * self.width + col) * 3;
         &mut self.data[i..i + 3]

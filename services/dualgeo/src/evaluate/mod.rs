@@ -17,6 +17,8 @@
 mod noise;
 mod plots;
 mod report;
+pub mod suite;
+mod suite_report;
 mod vision;
 
 use acquisition::sim::Presets;
@@ -40,6 +42,59 @@ pub struct EvaluateArgs {
     /// Where evaluation.md and evaluation/*.png go.
     #[arg(long, default_value = "docs")]
     pub out: PathBuf,
+    /// Only the scene suite: writes OUT/suite.md (the paper's tables are not rerun).
+    /// Every suite run also writes OUT/suite.json.
+    #[arg(long, conflicts_with = "no_suite")]
+    pub suite_only: bool,
+    /// Skip the scene suite (the paper's tables only).
+    #[arg(long)]
+    pub no_suite: bool,
+    /// Suite scenes to run (comma-separated preset names; default: all of them).
+    #[arg(long, value_delimiter = ',')]
+    pub scenes: Vec<String>,
+    /// Seconds of each suite scene (default: the preset's, 24 s).
+    #[arg(long)]
+    pub suite_duration_s: Option<f64>,
+    /// A `dualgeo run --config` TOML whose `[matching]` section the suite runs with
+    /// (for tuning; the published table uses the defaults).
+    #[arg(long)]
+    pub config: Option<PathBuf>,
+}
+
+/// Runs the scene suite one scene after another (so the CPU figures are not shared
+/// with another scene), with a progress bar; returns its markdown section.
+fn run_suite(args: &EvaluateArgs, every: u64) -> Result<String> {
+    let started = Instant::now();
+    let scenes: Vec<String> = if args.scenes.is_empty() {
+        suite::SUITE.iter().map(|s| s.to_string()).collect()
+    } else {
+        args.scenes.clone()
+    };
+    let bar = ProgressBar::new(0);
+    bar.set_style(
+        ProgressStyle::with_template("{msg:28} {bar:40} {pos}/{len} {elapsed_precise}")
+            .unwrap_or_else(|_| ProgressStyle::default_bar()),
+    );
+    let matching: matching::MatchingConfig =
+        shared_types::shell::load_section(args.config.as_deref(), "matching")?;
+    matching
+        .validate()
+        .map_err(|e| anyhow::anyhow!("[matching]: {e}"))?;
+    let mut results = Vec::new();
+    for name in &scenes {
+        bar.set_message(format!("suite: {name}"));
+        results.push(suite::run_scene(name, every, args.suite_duration_s, &matching, &bar)?);
+    }
+    bar.finish();
+    std::fs::create_dir_all(&args.out).with_context(|| format!("create {}", args.out.display()))?;
+    let json = args.out.join("suite.json");
+    std::fs::write(&json, serde_json::to_string_pretty(&suite::summary(&results))?)
+        .with_context(|| format!("write {}", json.display()))?;
+    Ok(suite_report::section(
+        &results,
+        every,
+        started.elapsed().as_secs_f64(),
+    ))
 }
 
 /// One sweep: file key, title, x-axis label, and (preset, level) ×5.
@@ -111,6 +166,16 @@ pub const STEP_DEG: f64 = 15.0;
 pub fn run(args: &EvaluateArgs) -> Result<()> {
     let started = Instant::now();
     let every = args.every.unwrap_or(if args.quick { 10 } else { 2 }).max(1);
+    if args.suite_only {
+        let section = run_suite(args, every)?;
+        std::fs::create_dir_all(&args.out)
+            .with_context(|| format!("create {}", args.out.display()))?;
+        let path = args.out.join("suite.md");
+        std::fs::write(&path, format!("# Scene suite\n\n{section}"))
+            .with_context(|| format!("write {}", path.display()))?;
+        println!("{section}\nscene suite written to {}", path.display());
+        return Ok(());
+    }
     let bar = ProgressBar::new(0);
     bar.set_style(
         ProgressStyle::with_template("{msg:28} {bar:40} {pos}/{len} {elapsed_precise}")
@@ -176,8 +241,13 @@ pub fn run(args: &EvaluateArgs) -> Result<()> {
     let results = results
         .into_inner()
         .map_err(|_| anyhow::anyhow!("a noise pass panicked"))?;
+    let suite = if args.no_suite {
+        None
+    } else {
+        Some(run_suite(args, every)?)
+    };
     let total_s = started.elapsed().as_secs_f64();
-    report::write(args, every, &pass, &results, vision_s, total_s)?;
+    report::write(args, every, &pass, &results, suite.as_deref(), vision_s, total_s)?;
     println!(
         "evaluation written to {} ({:.0} s: vision pass {:.0} s)",
         args.out.join("evaluation.md").display(),

@@ -101,6 +101,7 @@ pub fn run(every: u64, progress: &indicatif::ProgressBar) -> Result<VisionPass> 
                     image,
                     detection: detector.detect(image)?.map(|d| d.centre),
                     intrinsics: sim.intrinsics(),
+                    distortion: sim.distortion(),
                     width: w as u32,
                     height: h as u32,
                 })
