@@ -14,7 +14,14 @@ fn quick_evaluation_writes_every_table_and_figure() {
     }
     let _guard = Cleanup(out.clone());
     let o = Command::new(env!("CARGO_BIN_EXE_dualgeo"))
-        .args(["evaluate", "--quick", "--out", out.to_str().unwrap()])
+        .args([
+            "evaluate",
+            "--quick",
+            "--scenes",
+            "suite_town",
+            "--out",
+            out.to_str().unwrap(),
+        ])
         .output()
         .expect("spawn dualgeo");
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
@@ -29,6 +36,7 @@ fn quick_evaluation_writes_every_table_and_figure() {
         "## Figure 11",
         "## Figure 12",
         "## Targets (issue #6)",
+        "## Scene suite",
     ] {
         assert!(md.contains(section), "{section} missing");
     }

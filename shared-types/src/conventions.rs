@@ -161,9 +161,10 @@ pub fn camera_to_world_partials(att: Attitude) -> [Matrix3<f64>; 3] {
     ]
 }
 
-/// Pinhole intrinsics of eq. (26), in pixels, OpenCV convention. Images in dualgeo are
-/// undistorted before they reach the estimator (recording-format distortion is applied
-/// to pixels by the vision crates, never here).
+/// Pinhole intrinsics of eq. (26), in pixels, OpenCV convention. Pixels are undistorted
+/// before they reach the estimator: matching moves the keypoints and the detection
+/// through [`crate::lens::Distortion`] (the recording's `distortion`); images are not
+/// remapped.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct Intrinsics {
     pub fx: f64,

@@ -95,7 +95,10 @@ mod tests {
     #[test]
     fn none_is_the_identity() {
         let k = Intrinsics::new(554.0, 554.0, 319.5, 239.5);
-        assert_eq!(Distortion::NONE.distort_pixel(&k, 3.25, 470.0), [3.25, 470.0]);
+        assert_eq!(
+            Distortion::NONE.distort_pixel(&k, 3.25, 470.0),
+            [3.25, 470.0]
+        );
         assert_eq!(
             Distortion::NONE.undistort_pixel(&k, 3.25, 470.0),
             Some([3.25, 470.0])

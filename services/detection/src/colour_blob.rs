@@ -6,7 +6,7 @@
 //! sunlit roof, whose centre is the recording format's target point (the centre of the
 //! vehicle's top face); the darker sides would pull the centroid sideways.
 
-use super::{check_bgr, DetectError, Detection, Detector};
+use super::{check_bgr, DetectError, Detection, Detector, PartialViewConfig};
 use opencv::core as cv;
 use opencv::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -21,6 +21,15 @@ pub struct ColourBlobConfig {
     /// Blobs outside this area (pixels) are ignored.
     pub min_area_px: i32,
     pub max_area_px: i32,
+    /// When nothing passes `value_min`, look once more with `value_min` scaled by the
+    /// frame's exposure: the 99th percentile of its brightness over 255 (an
+    /// under-exposed camera darkens the target and everything else alike, so the ratio
+    /// between the target's lit roof and its dark sides is kept). Counted by the caller
+    /// through [`ColourBlobDetector::exposure_retries`].
+    pub adapt_to_exposure: bool,
+    /// Dropping detections of a partly hidden target (`partial_view.rs`), applied per
+    /// camera by whoever streams frames through the detector.
+    pub partial_view: PartialViewConfig,
 }
 
 impl Default for ColourBlobConfig {
@@ -31,6 +40,8 @@ impl Default for ColourBlobConfig {
             value_min: 170,
             min_area_px: 12,
             max_area_px: 20_000,
+            adapt_to_exposure: true,
+            partial_view: PartialViewConfig::default(),
         }
     }
 }
@@ -44,6 +55,7 @@ pub struct ColourBlobDetector {
     labels: cv::Mat,
     stats: cv::Mat,
     centroids: cv::Mat,
+    exposure_retries: u64,
 }
 
 impl ColourBlobDetector {
@@ -58,6 +70,10 @@ impl ColourBlobDetector {
                 "hue_ranges need lo <= hi <= 180".into(),
             ));
         }
+        config
+            .partial_view
+            .validate()
+            .map_err(DetectError::Config)?;
         if config.min_area_px < 1 || config.max_area_px < config.min_area_px {
             return Err(DetectError::Config(
                 "need 1 <= min_area_px <= max_area_px".into(),
@@ -72,17 +88,38 @@ impl ColourBlobDetector {
             labels: cv::Mat::default(),
             stats: cv::Mat::default(),
             centroids: cv::Mat::default(),
+            exposure_retries: 0,
         })
     }
-}
 
-impl Detector for ColourBlobDetector {
-    fn detect(&mut self, frame: &cv::Mat) -> Result<Option<Detection>, DetectError> {
-        check_bgr(frame)?;
-        opencv::imgproc::cvt_color_def(frame, &mut self.hsv, opencv::imgproc::COLOR_BGR2HSV)?;
+    /// Frames on which the exposure-scaled second look ran (since creation).
+    pub fn exposure_retries(&self) -> u64 {
+        self.exposure_retries
+    }
+
+    /// The 99th percentile of the V channel of `self.hsv`, 0–255.
+    fn bright_percentile(&self) -> Result<u8, DetectError> {
+        let bytes = self.hsv.data_bytes()?;
+        let mut histogram = [0u64; 256];
+        for px in bytes.chunks_exact(3) {
+            histogram[px[2] as usize] += 1;
+        }
+        let total: u64 = histogram.iter().sum();
+        let mut above = 0u64;
+        for v in (0..256).rev() {
+            above += histogram[v];
+            if above * 100 >= total {
+                return Ok(v as u8);
+            }
+        }
+        Ok(0)
+    }
+
+    /// The largest blob of the target's colour with `value_min`, if any: (label, area).
+    fn largest_blob(&mut self, value_min: f64) -> Result<Option<(i32, i32)>, DetectError> {
         let c = &self.config;
         for (i, [lo, hi]) in c.hue_ranges.iter().enumerate() {
-            let low = cv::Scalar::new(*lo as f64, c.saturation_min as f64, c.value_min as f64, 0.0);
+            let low = cv::Scalar::new(*lo as f64, c.saturation_min as f64, value_min, 0.0);
             let high = cv::Scalar::new(*hi as f64, 255.0, 255.0, 0.0);
             if i == 0 {
                 cv::in_range(&self.hsv, &low, &high, &mut self.mask)?;
@@ -110,6 +147,23 @@ impl Detector for ColourBlobDetector {
             }
             if best.is_none_or(|(_, a)| area > a) {
                 best = Some((label, area));
+            }
+        }
+        Ok(best)
+    }
+}
+
+impl Detector for ColourBlobDetector {
+    fn detect(&mut self, frame: &cv::Mat) -> Result<Option<Detection>, DetectError> {
+        check_bgr(frame)?;
+        opencv::imgproc::cvt_color_def(frame, &mut self.hsv, opencv::imgproc::COLOR_BGR2HSV)?;
+        let value_min = self.config.value_min as f64;
+        let mut best = self.largest_blob(value_min)?;
+        if best.is_none() && self.config.adapt_to_exposure {
+            let exposure = self.bright_percentile()? as f64 / 255.0;
+            if exposure < 0.95 {
+                self.exposure_retries += 1;
+                best = self.largest_blob((value_min * exposure).max(1.0))?;
             }
         }
         let Some((label, area)) = best else {
@@ -180,10 +234,19 @@ mod tests {
             .detect(&frame_with_rect(40, 30, 20, 9, [200.0, 60.0, 40.0]))
             .unwrap()
             .is_none());
-        assert!(d
-            .detect(&frame_with_rect(40, 30, 20, 9, [24.0, 18.0, 140.0]))
-            .unwrap()
-            .is_none());
+        // A dark side in a well-exposed frame (a white roof sets the exposure), so the
+        // exposure retry keeps the threshold where it is.
+        let mut side = frame_with_rect(40, 30, 20, 9, [24.0, 18.0, 140.0]);
+        opencv::imgproc::rectangle(
+            &mut side,
+            cv::Rect::new(100, 60, 30, 30),
+            cv::Scalar::all(250.0),
+            -1,
+            opencv::imgproc::LINE_8,
+            0,
+        )
+        .unwrap();
+        assert!(d.detect(&side).unwrap().is_none());
         let gray =
             cv::Mat::new_rows_cols_with_default(10, 10, cv::CV_8UC1, cv::Scalar::all(0.0)).unwrap();
         assert!(matches!(
@@ -195,5 +258,59 @@ mod tests {
             ..Default::default()
         })
         .is_err());
+    }
+
+    /// A frame scaled by `gain` (an under-exposed camera).
+    fn darkened(frame: &cv::Mat, gain: f64) -> cv::Mat {
+        let mut out = cv::Mat::default();
+        frame.convert_to(&mut out, -1, gain, 0.0).unwrap();
+        out
+    }
+
+    #[test]
+    fn an_under_exposed_camera_still_finds_the_target_but_not_its_dark_sides() {
+        // A bright white patch (a roof) sets the frame's exposure.
+        let mut frame = frame_with_rect(40, 30, 20, 9, [36.0, 28.0, 214.0]);
+        opencv::imgproc::rectangle(
+            &mut frame,
+            cv::Rect::new(100, 60, 30, 30),
+            cv::Scalar::all(250.0),
+            -1,
+            opencv::imgproc::LINE_8,
+            0,
+        )
+        .unwrap();
+        let dark = darkened(&frame, 0.6);
+        let strict = ColourBlobConfig {
+            adapt_to_exposure: false,
+            ..Default::default()
+        };
+        assert!(ColourBlobDetector::new(strict)
+            .unwrap()
+            .detect(&dark)
+            .unwrap()
+            .is_none());
+        let mut d = ColourBlobDetector::new(ColourBlobConfig::default()).unwrap();
+        let det = d
+            .detect(&dark)
+            .unwrap()
+            .expect("found after the exposure retry");
+        assert_eq!(det.bbox, [40.0, 30.0, 20.0, 9.0]);
+        assert_eq!(d.exposure_retries(), 1);
+        // The dark side of the same darkened frame stays below the scaled threshold.
+        let mut side = frame_with_rect(40, 30, 20, 9, [24.0, 18.0, 140.0]);
+        opencv::imgproc::rectangle(
+            &mut side,
+            cv::Rect::new(100, 60, 30, 30),
+            cv::Scalar::all(250.0),
+            -1,
+            opencv::imgproc::LINE_8,
+            0,
+        )
+        .unwrap();
+        assert!(d.detect(&darkened(&side, 0.6)).unwrap().is_none());
+        // A well-exposed frame is never retried.
+        assert!(d.detect(&frame).unwrap().is_some());
+        assert_eq!(d.exposure_retries(), 2);
     }
 }

@@ -6,9 +6,11 @@
 
 mod colour_blob;
 pub mod frame_view;
+mod partial_view;
 pub mod yolo;
 
 pub use colour_blob::{ColourBlobConfig, ColourBlobDetector};
+pub use partial_view::{PartialViewConfig, PartialViewGuard};
 
 use opencv::core as cv;
 

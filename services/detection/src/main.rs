@@ -5,12 +5,14 @@
 //! Histograms (µs): `transport` (frame publish → this stage woke, first frame of a
 //! wake-up), `wait` (frame publish → processing starts), `compute` (detection).
 //! Counters: `frames`, `found`, `frames_lost` (sequence gaps: overwritten while busy),
-//! `bad_frames`.
+//! `bad_frames`, `exposure_retries` (frames looked at again with the exposure-scaled
+//! brightness floor), `partial_view_dropped` (detections of a partly hidden target,
+//! dropped by the per-camera [`PartialViewGuard`]).
 
 use anyhow::{Context, Result};
 use clap::Parser;
 use detection::frame_view::frame_mat;
-use detection::{ColourBlobConfig, ColourBlobDetector, Detector};
+use detection::{ColourBlobConfig, ColourBlobDetector, Detector, PartialViewGuard};
 use shared_types::clock::{elapsed_us, monotonic_ns};
 use shared_types::conventions::Uav;
 use shared_types::messages::DetectionMsg;
@@ -30,7 +32,9 @@ fn main() -> Result<()> {
     let args = Args::parse();
     init_tracing("detection");
     let config: ColourBlobConfig = load_section(args.service.config.as_deref(), "detection")?;
+    let mut guards = [PartialViewGuard::new(config.partial_view); 2];
     let mut detector = ColourBlobDetector::new(config).context("detector configuration")?;
+    let mut exposure_retries = 0;
     let endpoint = Endpoint::new(&args.service.run_id, "detection")?;
     let frames = [
         endpoint.frame_subscriber(Uav::Left)?,
@@ -81,6 +85,18 @@ fn main() -> Result<()> {
                     uav: header.uav,
                     ..Default::default()
                 };
+                let found = found.filter(|d| {
+                    let whole = guards[uav].accept(header.t_s, d);
+                    if !whole {
+                        stats.count("partial_view_dropped", 1);
+                    }
+                    whole
+                });
+                stats.count(
+                    "exposure_retries",
+                    detector.exposure_retries() - exposure_retries,
+                );
+                exposure_retries = detector.exposure_retries();
                 if let Some(d) = found {
                     stats.count("found", 1);
                     msg.found = 1;

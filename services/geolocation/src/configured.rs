@@ -44,12 +44,14 @@ pub fn estimate_set(
         }),
         Some(filter) => {
             let start = window.as_ref().ok().map(|f| &f.estimate);
-            filter.update(t_s, current, past, start).map(|t| SetEstimate {
-                estimate: t.estimate,
-                velocity: Some(t.velocity),
-                reopened: t.reopened,
-                rays_rejected: t.rays_rejected,
-            })
+            filter
+                .update(t_s, current, past, start)
+                .map(|t| SetEstimate {
+                    estimate: t.estimate,
+                    velocity: Some(t.velocity),
+                    reopened: t.reopened,
+                    rays_rejected: t.rays_rejected,
+                })
         }
     }
 }

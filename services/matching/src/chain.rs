@@ -6,8 +6,8 @@
 
 use crate::config::MatchingConfig;
 use crate::epipolar::{
-    estimate_fundamental, match_points, match_points_guided, transfer_point, MatchReject,
-    PairGeometry,
+    estimate_fundamental, match_points, match_points_guided, transfer_point, ImageBounds,
+    MatchReject, PairGeometry,
 };
 use crate::features::{Features, OrbExtractor};
 use crate::ground_plane::PlaneModel;
@@ -364,6 +364,7 @@ impl VisionChain {
                 pose: frame.pose,
                 baseline_position,
                 intrinsics: frame.intrinsics,
+                distortion: frame.distortion,
                 width: frame.width,
                 height: frame.height,
                 features: features[uav.index()].clone(),
@@ -637,8 +638,12 @@ fn match_past(
         detections[0],
         &gr.f,
         detections[1],
-        kf.width,
-        kf.height,
+        &ImageBounds {
+            intrinsics: &kf.intrinsics,
+            distortion: &kf.distortion,
+            width: kf.width,
+            height: kf.height,
+        },
         config,
     );
     out.timing.transfer_us += micros(t);

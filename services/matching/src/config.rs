@@ -69,8 +69,11 @@ pub struct MatchingConfig {
     pub baseline_smoothing_s: f64,
     /// Keyframes kept per UAV.
     pub ring_capacity: usize,
-    /// ORB features per frame.
+    /// ORB features per frame of up to 640 × 480 pixels. With `orb_scale_with_area` a
+    /// larger frame gets proportionally more (by pixel count, at most 4×): the same
+    /// density of features, so a 1280 × 720 camera is not starved.
     pub orb_features: i32,
+    pub orb_scale_with_area: bool,
     /// Cells the features are spread over (0 = ORB's own ranking only): each cell keeps
     /// its best keypoints up to an equal share of `orb_features` (`features.rs`).
     pub orb_spread_cells: usize,
@@ -141,6 +144,7 @@ impl Default for MatchingConfig {
             orb_features: 500,
             orb_spread_cells: 48,
             orb_candidate_factor: 4,
+            orb_scale_with_area: true,
             orb_fast_thresholds: vec![20, 10, 5],
             orb_levels: 3,
             orb_score: OrbScore::Fast,
@@ -186,7 +190,10 @@ impl MatchingConfig {
             && self.orb_spread_cells <= 4096
             && (1..=16).contains(&self.orb_candidate_factor)
             && self.orb_fast_thresholds.len() <= 8
-            && self.orb_fast_thresholds.iter().all(|t| (1..=255).contains(t))
+            && self
+                .orb_fast_thresholds
+                .iter()
+                .all(|t| (1..=255).contains(t))
             && (0.0..=1000.0).contains(&self.guided_radius_px)
             && (0.0..=60.0).contains(&self.guided_max_age_s)
             && self.ransac_threshold_px > 0.0

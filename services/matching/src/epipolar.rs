@@ -18,6 +18,7 @@ use nalgebra::{Matrix3, Vector3};
 use opencv::core as cv;
 use opencv::prelude::*;
 use shared_types::conventions::Intrinsics;
+use shared_types::lens::Distortion;
 
 /// Why a past image gave no corresponding point (counted per reason).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -294,6 +295,35 @@ pub(crate) fn usac_params(
     Ok(p)
 }
 
+/// The frame a transferred point must fall in. Points are undistorted (ideal pinhole
+/// pixels), so with a lens the test is on the point *distorted back*: under barrel
+/// distortion the ideal image reaches beyond the sensor's rectangle, and a point there
+/// is still seen.
+pub struct ImageBounds<'a> {
+    pub intrinsics: &'a Intrinsics,
+    pub distortion: &'a Distortion,
+    pub width: u32,
+    pub height: u32,
+}
+
+impl ImageBounds<'_> {
+    /// Whether the undistorted pixel (u, v) is seen at least `border` px inside the frame.
+    pub fn contains(&self, u: f64, v: f64, border: f64) -> bool {
+        if !(u.is_finite() && v.is_finite()) {
+            return false;
+        }
+        let [ud, vd] = if self.distortion.is_none() {
+            [u, v]
+        } else {
+            self.distortion.distort_pixel(self.intrinsics, u, v)
+        };
+        ud >= border
+            && vd >= border
+            && ud <= self.width as f64 - 1.0 - border
+            && vd <= self.height as f64 - 1.0 - border
+    }
+}
+
 /// Eq. (27)–(28): the intersection in the past image of the epipolar lines of the
 /// current left and right target pixels.
 pub fn transfer_point(
@@ -301,8 +331,7 @@ pub fn transfer_point(
     pixel_left: [f64; 2],
     f_right: &Matrix3<f64>,
     pixel_right: [f64; 2],
-    width: u32,
-    height: u32,
+    bounds: &ImageBounds,
     config: &MatchingConfig,
 ) -> Result<[f64; 2], MatchReject> {
     let l1 = f_left * Vector3::new(pixel_left[0], pixel_left[1], 1.0);
@@ -315,9 +344,7 @@ pub fn transfer_point(
     }
     let p = l1.cross(&l2);
     let (u, v) = (p.x / p.z, p.y / p.z);
-    let b = config.border_px;
-    let inside = u >= b && v >= b && u <= width as f64 - 1.0 - b && v <= height as f64 - 1.0 - b;
-    if !inside || !u.is_finite() || !v.is_finite() {
+    if !bounds.contains(u, v, config.border_px) {
         return Err(MatchReject::OutsideImage { u, v });
     }
     Ok([u, v])
@@ -326,6 +353,38 @@ pub fn transfer_point(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    const K: Intrinsics = Intrinsics {
+        fx: 500.0,
+        fy: 500.0,
+        cx: 320.0,
+        cy: 240.0,
+    };
+
+    fn pinhole(width: u32, height: u32) -> ImageBounds<'static> {
+        ImageBounds {
+            intrinsics: &K,
+            distortion: &Distortion::NONE,
+            width,
+            height,
+        }
+    }
+
+    #[test]
+    fn under_barrel_distortion_the_seen_field_reaches_past_the_ideal_rectangle() {
+        let barrel = Distortion([-0.25, 0.07, 0.0, 0.0, 0.0]);
+        let lens = ImageBounds {
+            distortion: &barrel,
+            ..pinhole(640, 480)
+        };
+        // An ideal pixel 20 px left of the frame: the pinhole never sees it, the barrel
+        // lens pulls it inside.
+        assert!(!pinhole(640, 480).contains(-20.0, 240.0, 0.0));
+        assert!(lens.contains(-20.0, 240.0, 0.0));
+        // Far outside stays outside, and NaN is never inside.
+        assert!(!lens.contains(-400.0, 240.0, 0.0));
+        assert!(!lens.contains(f64::NAN, 240.0, 0.0));
+    }
 
     #[test]
     fn lines_through_a_point_intersect_at_it() {
@@ -342,8 +401,7 @@ mod tests {
             [0.0, 0.0],
             &f2,
             [0.0, 0.0],
-            640,
-            480,
+            &pinhole(640, 480),
             &MatchingConfig::default(),
         )
         .unwrap();
@@ -356,8 +414,7 @@ mod tests {
                 [0.0, 0.0],
                 &parallel,
                 [0.0, 0.0],
-                640,
-                480,
+                &pinhole(640, 480),
                 &MatchingConfig::default()
             ),
             Err(MatchReject::NearParallelLines { .. })
@@ -368,8 +425,7 @@ mod tests {
                 [0.0, 0.0],
                 &f2,
                 [0.0, 0.0],
-                90,
-                70,
+                &pinhole(90, 70),
                 &MatchingConfig::default()
             ),
             Err(MatchReject::OutsideImage { .. })

@@ -5,10 +5,10 @@ use opencv::core as cv;
 use opencv::prelude::*;
 
 use crate::config::{MatchingConfig, OrbScore};
-use shared_types::conventions::Intrinsics;
-use shared_types::lens::Distortion;
 use crate::grid::PointGrid;
 use crate::hamming::{pack, Descriptor};
+use shared_types::conventions::Intrinsics;
+use shared_types::lens::Distortion;
 
 /// Cell size of [`Features::grid`], pixels.
 const GRID_CELL_PX: f32 = 32.0;
@@ -42,7 +42,13 @@ impl Features {
     /// Moves every keypoint to its undistorted position (the ideal pinhole pixel of the
     /// same K), so epipolar geometry holds on them; keypoints the lens model cannot
     /// invert are dropped with their descriptors. Returns how many were dropped.
-    pub fn undistort(&mut self, k: &Intrinsics, lens: &Distortion, width: u32, height: u32) -> usize {
+    pub fn undistort(
+        &mut self,
+        k: &Intrinsics,
+        lens: &Distortion,
+        width: u32,
+        height: u32,
+    ) -> usize {
         if lens.is_none() {
             return 0;
         }
@@ -65,6 +71,8 @@ pub struct OrbExtractor {
     gray: cv::Mat,
     subpixel: bool,
     budget: usize,
+    scale_with_area: bool,
+    candidate_factor: usize,
     spread_cells: usize,
     fast_thresholds: Vec<i32>,
 }
@@ -124,9 +132,21 @@ impl OrbExtractor {
             gray: cv::Mat::default(),
             subpixel: config.subpixel_keypoints,
             budget: config.orb_features.max(0) as usize,
+            scale_with_area: config.orb_scale_with_area,
+            candidate_factor: factor.max(1) as usize,
             spread_cells: config.orb_spread_cells,
             fast_thresholds: thresholds,
         })
+    }
+
+    /// The feature budget of a `width` × `height` frame: `orb_features` up to 640 × 480,
+    /// then in proportion to the pixel count (at most 4×) when `orb_scale_with_area`.
+    pub fn budget_for(&self, width: i32, height: i32) -> usize {
+        if !self.scale_with_area {
+            return self.budget;
+        }
+        let ratio = (width.max(0) as f64 * height.max(0) as f64) / (640.0 * 480.0);
+        (self.budget as f64 * ratio.clamp(1.0, 4.0)).round() as usize
     }
 
     /// ORB on a BGR or grey frame.
@@ -135,7 +155,10 @@ impl OrbExtractor {
     }
 
     /// [`OrbExtractor::extract`], and what it had to do.
-    pub fn extract_reported(&mut self, frame: &cv::Mat) -> opencv::Result<(Features, ExtractReport)> {
+    pub fn extract_reported(
+        &mut self,
+        frame: &cv::Mat,
+    ) -> opencv::Result<(Features, ExtractReport)> {
         let gray = if frame.channels() == 3 {
             opencv::imgproc::cvt_color_def(frame, &mut self.gray, opencv::imgproc::COLOR_BGR2GRAY)?;
             &self.gray
@@ -143,19 +166,31 @@ impl OrbExtractor {
             frame
         };
         let mut report = ExtractReport::default();
+        let budget = self.budget_for(gray.cols(), gray.rows());
+        self.orb.set_max_features(
+            budget
+                .saturating_mul(self.candidate_factor)
+                .min(i32::MAX as usize) as i32,
+        )?;
         let mut keypoints = cv::Vector::<cv::KeyPoint>::new();
         for (i, &threshold) in self.fast_thresholds.iter().enumerate() {
             self.orb.set_fast_threshold(threshold)?;
             self.orb.detect_def(gray, &mut keypoints)?;
             let last = i + 1 == self.fast_thresholds.len();
-            if keypoints.len() >= self.budget || last {
+            if keypoints.len() >= budget || last {
                 break;
             }
             report.threshold_lowered += 1;
         }
         report.candidates = keypoints.len();
-        if self.spread_cells > 0 && keypoints.len() > self.budget {
-            keypoints = spread(&keypoints, self.budget, self.spread_cells, gray.cols(), gray.rows());
+        if self.spread_cells > 0 && keypoints.len() > budget {
+            keypoints = spread(
+                &keypoints,
+                budget,
+                self.spread_cells,
+                gray.cols(),
+                gray.rows(),
+            );
         }
         let mut descriptors = cv::Mat::default();
         self.orb.compute(gray, &mut keypoints, &mut descriptors)?;
@@ -256,10 +291,18 @@ mod tests {
         // half (the ground).
         let mut all = cv::Vector::<cv::KeyPoint>::new();
         for i in 0..400 {
-            all.push(keypoint((i % 20) as f32 * 15.0, (i / 20) as f32 * 23.0, 100.0 + i as f32));
+            all.push(keypoint(
+                (i % 20) as f32 * 15.0,
+                (i / 20) as f32 * 23.0,
+                100.0 + i as f32,
+            ));
         }
         for i in 0..100 {
-            all.push(keypoint(330.0 + (i % 10) as f32 * 30.0, (i / 10) as f32 * 47.0, 10.0));
+            all.push(keypoint(
+                330.0 + (i % 10) as f32 * 30.0,
+                (i / 10) as f32 * 47.0,
+                10.0,
+            ));
         }
         let kept = spread(&all, 200, 48, 640, 480);
         assert_eq!(kept.len(), 200);
@@ -272,11 +315,39 @@ mod tests {
     fn spreading_fills_the_budget_from_the_best_when_cells_run_dry() {
         let mut all = cv::Vector::<cv::KeyPoint>::new();
         for i in 0..300 {
-            all.push(keypoint(5.0 + (i % 10) as f32, 5.0 + (i / 10) as f32, i as f32));
+            all.push(keypoint(
+                5.0 + (i % 10) as f32,
+                5.0 + (i / 10) as f32,
+                i as f32,
+            ));
         }
         let kept = spread(&all, 100, 48, 640, 480);
         assert_eq!(kept.len(), 100);
-        let weakest = kept.iter().map(|k| k.response()).fold(f32::INFINITY, f32::min);
+        let weakest = kept
+            .iter()
+            .map(|k| k.response())
+            .fold(f32::INFINITY, f32::min);
         assert!(weakest >= 200.0, "kept a weak one: {weakest}");
+    }
+
+    #[test]
+    fn the_budget_follows_the_pixel_count_above_vga() {
+        let config = MatchingConfig::default();
+        let orb = OrbExtractor::new(&config).unwrap();
+        let base = config.orb_features as usize;
+        assert_eq!(orb.budget_for(640, 480), base);
+        assert_eq!(
+            orb.budget_for(320, 240),
+            base,
+            "smaller frames keep the base budget"
+        );
+        assert_eq!(orb.budget_for(1280, 720), 3 * base);
+        assert_eq!(orb.budget_for(8000, 6000), 4 * base, "capped at 4x");
+        let fixed = OrbExtractor::new(&MatchingConfig {
+            orb_scale_with_area: false,
+            ..config
+        })
+        .unwrap();
+        assert_eq!(fixed.budget_for(1280, 720), base);
     }
 }

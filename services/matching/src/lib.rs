@@ -17,7 +17,7 @@ pub mod hamming;
 pub mod ring;
 
 pub use chain::{
-    estimate_matched, extract_undistorted, ChainCounts, ChainOutcome, ChainResult, ChainTiming, FrameInput, FrameMeta, Located,
-    MatchOutcome, MatchedSet, PastMatch, VisionChain,
+    estimate_matched, extract_undistorted, ChainCounts, ChainOutcome, ChainResult, ChainTiming,
+    FrameInput, FrameMeta, Located, MatchOutcome, MatchedSet, PastMatch, VisionChain,
 };
 pub use config::{FundamentalMethod, MatchingConfig, OrbScore, UsacLocalOptimisation, UsacScore};

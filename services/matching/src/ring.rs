@@ -4,6 +4,7 @@
 use crate::features::Features;
 use nalgebra::Point3;
 use shared_types::conventions::Intrinsics;
+use shared_types::lens::Distortion;
 use shared_types::messages::PoseSample;
 use std::collections::VecDeque;
 use std::sync::Arc;
@@ -20,6 +21,8 @@ pub struct Keyframe {
     /// frames are T_re apart.
     pub baseline_position: Point3<f64>,
     pub intrinsics: Intrinsics,
+    /// The lens: the transferred target pixel must fall inside the *distorted* frame.
+    pub distortion: Distortion,
     pub width: u32,
     pub height: u32,
     pub features: Arc<Features>,
@@ -106,6 +109,7 @@ mod tests {
             },
             baseline_position: Point3::new(x, 0.0, 0.0),
             intrinsics: Intrinsics::new(500.0, 500.0, 320.0, 240.0),
+            distortion: Distortion::NONE,
             width: 640,
             height: 480,
             features: Arc::new(Features::default()),

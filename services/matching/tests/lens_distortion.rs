@@ -86,7 +86,10 @@ fn run(preset: &str, tell_the_lens: bool) -> (usize, usize, f64) {
         }
     }
     errors.sort_by(f64::total_cmp);
-    let median = errors.get(errors.len() / 2).copied().unwrap_or(f64::INFINITY);
+    let median = errors
+        .get(errors.len() / 2)
+        .copied()
+        .unwrap_or(f64::INFINITY);
     (errors.len(), tried, median)
 }
 
@@ -100,8 +103,14 @@ fn a_distorted_camera_locates_like_its_pinhole_twin() {
          distorted, undistorted by matching: {lens_n}/{lens_tried}, {lens_err:.3} m; \
          distorted, lens ignored: {raw_n}/{lens_tried}, {raw_err:.3} m"
     );
-    assert!(pin_n * 10 >= pin_tried * 8, "pinhole twin located {pin_n}/{pin_tried}");
-    assert!(lens_n * 10 >= pin_n * 9, "distorted located {lens_n} vs pinhole {pin_n}");
+    assert!(
+        pin_n * 10 >= pin_tried * 8,
+        "pinhole twin located {pin_n}/{pin_tried}"
+    );
+    assert!(
+        lens_n * 10 >= pin_n * 9,
+        "distorted located {lens_n} vs pinhole {pin_n}"
+    );
     // Within 10 %, or within 2 cm where both are a few centimetres.
     assert!(
         lens_err <= pin_err * 1.1 || lens_err <= pin_err + 0.02,

@@ -55,9 +55,12 @@ impl Default for CityConfig {
 impl CityConfig {
     /// Checks the layout knobs (the dimensions are checked by the scenario).
     pub fn validate_layout(&self) -> Result<(), String> {
-        let range_ok = |r: [f64; 2]| r[0].is_finite() && r[1].is_finite() && r[0] > 0.0 && r[1] >= r[0];
+        let range_ok =
+            |r: [f64; 2]| r[0].is_finite() && r[1].is_finite() && r[0] > 0.0 && r[1] >= r[0];
         if !range_ok(self.height_m) || !range_ok(self.central_height_m) {
-            return Err("city height_m and central_height_m must be [min, max] with 0 < min <= max".into());
+            return Err(
+                "city height_m and central_height_m must be [min, max] with 0 < min <= max".into(),
+            );
         }
         if !(0.0..=1.0).contains(&self.empty_lot_share) {
             return Err("city empty_lot_share must be within 0..=1".into());
@@ -65,7 +68,8 @@ impl CityConfig {
         if !(self.texture_contrast.is_finite() && (0.0..=4.0).contains(&self.texture_contrast)) {
             return Err("city texture_contrast must be within 0..=4".into());
         }
-        if !(self.roof_image_metres_per_pixel.is_finite() && self.roof_image_metres_per_pixel > 0.0) {
+        if !(self.roof_image_metres_per_pixel.is_finite() && self.roof_image_metres_per_pixel > 0.0)
+        {
             return Err("city roof_image_metres_per_pixel must be > 0".into());
         }
         Ok(())

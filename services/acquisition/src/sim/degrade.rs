@@ -109,13 +109,17 @@ impl ImageEffects {
             let normal = Normal::new(0.0, self.noise_sigma)
                 .map_err(|e| SimError::Config(format!("noise_sigma: {e}")))?;
             for b in bytes.iter_mut() {
-                *b = (*b as f64 + normal.sample(&mut rng)).round().clamp(0.0, 255.0) as u8;
+                *b = (*b as f64 + normal.sample(&mut rng))
+                    .round()
+                    .clamp(0.0, 255.0) as u8;
             }
         }
         if self.jpeg_quality > 0 {
             let mut encoded = cv::Vector::<u8>::new();
-            let params =
-                cv::Vector::from_slice(&[opencv::imgcodecs::IMWRITE_JPEG_QUALITY, self.jpeg_quality as i32]);
+            let params = cv::Vector::from_slice(&[
+                opencv::imgcodecs::IMWRITE_JPEG_QUALITY,
+                self.jpeg_quality as i32,
+            ]);
             opencv::imgcodecs::imencode(".jpg", &img, &mut encoded, &params).map_err(cv_err)?;
             img = opencv::imgcodecs::imdecode(&encoded, opencv::imgcodecs::IMREAD_COLOR)
                 .map_err(cv_err)?;
@@ -142,17 +146,31 @@ mod tests {
     fn identity_leaves_the_pixels_alone() {
         let mut img = stripes(32, 8);
         let before = img.clone();
-        ImageEffects::default().apply(0, 1, &mut img, 32, 8, 96).unwrap();
+        ImageEffects::default()
+            .apply(0, 1, &mut img, 32, 8, 96)
+            .unwrap();
         assert_eq!(img, before);
     }
 
     #[test]
     fn each_effect_changes_the_image_and_is_deterministic() {
         let effects = [
-            ImageEffects { exposure_gain: [1.0, 0.5], ..Default::default() },
-            ImageEffects { motion_blur_px: 4.0, ..Default::default() },
-            ImageEffects { noise_sigma: 5.0, ..Default::default() },
-            ImageEffects { jpeg_quality: 30, ..Default::default() },
+            ImageEffects {
+                exposure_gain: [1.0, 0.5],
+                ..Default::default()
+            },
+            ImageEffects {
+                motion_blur_px: 4.0,
+                ..Default::default()
+            },
+            ImageEffects {
+                noise_sigma: 5.0,
+                ..Default::default()
+            },
+            ImageEffects {
+                jpeg_quality: 30,
+                ..Default::default()
+            },
         ];
         for e in effects {
             e.validate().unwrap();
@@ -163,7 +181,10 @@ mod tests {
             assert_eq!(a, b, "{e:?} not deterministic");
             assert_ne!(a, stripes(32, 8), "{e:?} changed nothing");
         }
-        let bad = ImageEffects { noise_sigma: f64::NAN, ..Default::default() };
+        let bad = ImageEffects {
+            noise_sigma: f64::NAN,
+            ..Default::default()
+        };
         assert!(bad.validate().is_err());
     }
 }

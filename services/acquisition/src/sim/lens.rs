@@ -22,7 +22,12 @@ pub struct LensMap {
 impl LensMap {
     /// The map of a `width` × `height` camera with `k` and `lens`; an error when the
     /// lens model cannot be inverted somewhere in the image (coefficients too strong).
-    pub fn new(k: &Intrinsics, lens: &Distortion, width: u32, height: u32) -> Result<Self, SimError> {
+    pub fn new(
+        k: &Intrinsics,
+        lens: &Distortion,
+        width: u32,
+        height: u32,
+    ) -> Result<Self, SimError> {
         let (w, h) = (width as usize, height as usize);
         let mut source = Vec::with_capacity(w * h);
         let (mut lo, mut hi) = ([0.0f64; 2], [w as f64 - 1.0, h as f64 - 1.0]);
@@ -120,8 +125,14 @@ mod tests {
         for (u, v) in [(0usize, 0usize), (63, 0), (31, 24), (10, 40)] {
             let [x, y] = lens.undistort_pixel(&k, u as f64, v as f64).unwrap();
             let (x, y) = (x - k.cx + kc.cx, y - k.cy + kc.cy);
-            let got = [out[(v * 64 + u) * 3] as f64, out[(v * 64 + u) * 3 + 1] as f64];
-            assert!((got[0] - x).abs() < 0.6 && (got[1] - y).abs() < 0.6, "({u},{v}): {got:?} vs ({x},{y})");
+            let got = [
+                out[(v * 64 + u) * 3] as f64,
+                out[(v * 64 + u) * 3 + 1] as f64,
+            ];
+            assert!(
+                (got[0] - x).abs() < 0.6 && (got[1] - y).abs() < 0.6,
+                "({u},{v}): {got:?} vs ({x},{y})"
+            );
         }
     }
 

@@ -2,8 +2,8 @@
 //! UAV's view into a caller's buffer.
 
 use super::city::City;
-use super::motion::{Motion, Route, TrueState};
 use super::lens::LensMap;
+use super::motion::{Motion, Route, TrueState};
 use super::render::{CameraView, Renderer, Surface, VehicleBox};
 use super::scenario::SimConfig;
 use super::SimError;
@@ -306,7 +306,13 @@ fn render_view(
                 height: map.canvas[1] as u32,
                 ..*view
             };
-            renderer.render(city, Some(&step.vehicle), &canvas_view, pixels, 3 * map.canvas[0]);
+            renderer.render(
+                city,
+                Some(&step.vehicle),
+                &canvas_view,
+                pixels,
+                3 * map.canvas[0],
+            );
             map.resample(pixels, out, stride);
         }
     }
@@ -348,7 +354,11 @@ fn photo_to_bgr8(img: &opencv::core::Mat) -> opencv::Result<opencv::core::Mat> {
         let mut values: Vec<f32> = single.reshape(1, 0)?.data_typed::<f32>()?.to_vec();
         values.retain(|v| v.is_finite());
         values.sort_by(f32::total_cmp);
-        let at = |q: f64| values.get(((values.len() as f64 - 1.0) * q) as usize).copied();
+        let at = |q: f64| {
+            values
+                .get(((values.len() as f64 - 1.0) * q) as usize)
+                .copied()
+        };
         let (lo, hi) = (at(0.01).unwrap_or(0.0), at(0.99).unwrap_or(1.0));
         let scale = 255.0 / f64::from((hi - lo).max(1e-6));
         single.convert_to(&mut eight, cv::CV_8U, scale, -f64::from(lo) * scale)?;

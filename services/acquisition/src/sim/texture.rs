@@ -60,7 +60,13 @@ impl Texture {
         }
         let texels = (self.data.len() / 3) as f64;
         let mean: [f64; 3] = std::array::from_fn(|c| {
-            self.data.iter().skip(c).step_by(3).map(|v| *v as f64).sum::<f64>() / texels
+            self.data
+                .iter()
+                .skip(c)
+                .step_by(3)
+                .map(|v| *v as f64)
+                .sum::<f64>()
+                / texels
         });
         for (i, v) in self.data.iter_mut().enumerate() {
             let m = mean[i % 3];

@@ -83,13 +83,22 @@ fn run_suite(args: &EvaluateArgs, every: u64) -> Result<String> {
     let mut results = Vec::new();
     for name in &scenes {
         bar.set_message(format!("suite: {name}"));
-        results.push(suite::run_scene(name, every, args.suite_duration_s, &matching, &bar)?);
+        results.push(suite::run_scene(
+            name,
+            every,
+            args.suite_duration_s,
+            &matching,
+            &bar,
+        )?);
     }
     bar.finish();
     std::fs::create_dir_all(&args.out).with_context(|| format!("create {}", args.out.display()))?;
     let json = args.out.join("suite.json");
-    std::fs::write(&json, serde_json::to_string_pretty(&suite::summary(&results))?)
-        .with_context(|| format!("write {}", json.display()))?;
+    std::fs::write(
+        &json,
+        serde_json::to_string_pretty(&suite::summary(&results))?,
+    )
+    .with_context(|| format!("write {}", json.display()))?;
     Ok(suite_report::section(
         &results,
         every,
@@ -247,7 +256,15 @@ pub fn run(args: &EvaluateArgs) -> Result<()> {
         Some(run_suite(args, every)?)
     };
     let total_s = started.elapsed().as_secs_f64();
-    report::write(args, every, &pass, &results, suite.as_deref(), vision_s, total_s)?;
+    report::write(
+        args,
+        every,
+        &pass,
+        &results,
+        suite.as_deref(),
+        vision_s,
+        total_s,
+    )?;
     println!(
         "evaluation written to {} ({:.0} s: vision pass {:.0} s)",
         args.out.join("evaluation.md").display(),

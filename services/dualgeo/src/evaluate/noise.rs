@@ -76,6 +76,9 @@ pub struct Calibration {
     pub h2: usize,
     pub v1: usize,
     pub v2: usize,
+    /// The largest horizontal error over its stated h_acc: a confident wrong estimate
+    /// shows here even when it is one in a thousand.
+    pub worst_h_ratio: f64,
 }
 
 impl Calibration {
@@ -94,6 +97,9 @@ impl Calibration {
         self.h2 += (h <= 2.0 * h_acc) as usize;
         self.v1 += (v <= v_acc) as usize;
         self.v2 += (v <= 2.0 * v_acc) as usize;
+        if h_acc > 0.0 {
+            self.worst_h_ratio = self.worst_h_ratio.max(h / h_acc);
+        }
     }
 
     pub fn shares(&self) -> [f64; 4] {

@@ -34,7 +34,10 @@ fn pct(k: usize, n: usize) -> f64 {
 /// Markdown of the suite: `every` is the pair step, `seconds` the wall time.
 pub fn section(results: &[SceneResult], every: u64, seconds: f64) -> String {
     let mut w = String::new();
-    let _ = writeln!(w, "## Scene suite: accuracy on scenes unlike the tuning town (issue #12)\n");
+    let _ = writeln!(
+        w,
+        "## Scene suite: accuracy on scenes unlike the tuning town (issue #12)\n"
+    );
     let _ = writeln!(
         w,
         "Each `suite_*` preset (`dualgeo simulate --list`) is rendered once and streamed through the whole chain (colour detector, spread ORB, guided matching, ground-plane F, transfer) with the default configuration, every {every}{} pair, under both protocols: Table 1 gives the chain the true poses; Table 2 the measured ones (σ_att 2°, σ_pos 3 m, eq. 34 biases with δψ0 = 20°), keyframes chosen by them as in flight. Errors count after a {SUITE_WARM_UP_S:.0} s warm-up. {:.0} s on this 2-core machine. Regenerate with `cargo run --release -p dualgeo -- evaluate` (or `-- evaluate --suite-only`).\n",
@@ -123,8 +126,12 @@ pub fn section(results: &[SceneResult], every: u64, seconds: f64) -> String {
     }
     let _ = writeln!(w, "\nThe scenes:\n");
     for scene in results {
-        let _ = writeln!(w, "- `{}`: {}", scene.name, scene.description.trim_start_matches("Suite: "));
+        let _ = writeln!(
+            w,
+            "- `{}`: {}",
+            scene.name,
+            scene.description.trim_start_matches("Suite: ")
+        );
     }
     w
 }
-

@@ -5,7 +5,7 @@
 
 use acquisition::sim::{Presets, Simulator};
 use anyhow::Result;
-use detection::{ColourBlobConfig, ColourBlobDetector, Detector};
+use detection::{ColourBlobConfig, ColourBlobDetector, Detector, PartialViewGuard};
 use geolocation::EstimatorConfig;
 use matching::{ChainOutcome, FrameInput, MatchingConfig, VisionChain};
 use nalgebra::Point3;
@@ -52,7 +52,9 @@ pub fn run(every: u64, progress: &indicatif::ProgressBar) -> Result<VisionPass> 
     let (w, h) = (config.camera.width as i32, config.camera.height as i32);
     let mut sim = Simulator::new(config)?;
     progress.set_length(sim.frame_count() / every);
-    let mut detector = ColourBlobDetector::new(ColourBlobConfig::default())?;
+    let detector_config = ColourBlobConfig::default();
+    let mut guards = [PartialViewGuard::new(detector_config.partial_view); 2];
+    let mut detector = ColourBlobDetector::new(detector_config)?;
     let ns = [2usize, 4];
     let mut chains = ns
         .iter()
@@ -93,13 +95,17 @@ pub fn run(every: u64, progress: &indicatif::ProgressBar) -> Result<VisionPass> 
             .frames
             .iter()
             .zip(&images)
-            .map(|(f, image)| {
+            .zip(&mut guards)
+            .map(|((f, image), guard)| {
                 Ok(FrameInput {
                     seq: f.seq,
                     t_s: f.t_s,
                     pose: f.measured,
                     image,
-                    detection: detector.detect(image)?.map(|d| d.centre),
+                    detection: detector
+                        .detect(image)?
+                        .filter(|d| guard.accept(f.t_s, d))
+                        .map(|d| d.centre),
                     intrinsics: sim.intrinsics(),
                     distortion: sim.distortion(),
                     width: w as u32,
