@@ -22,9 +22,9 @@ const BOUNDS: [(&str, usize, f64, f64, f64); 6] = [
     ("suite_town", 0, 90.0, 0.25, 0.5),
     ("suite_town", 1, 90.0, 2.5, 2.0),
     ("suite_photo_urban", 0, 90.0, 0.25, 0.5),
-    ("suite_photo_urban", 1, 90.0, 3.0, 3.0),
+    ("suite_photo_urban", 1, 90.0, 3.0, 2.0),
     ("suite_degraded", 0, 90.0, 0.25, 0.5),
-    ("suite_degraded", 1, 85.0, 15.0, 5.0),
+    ("suite_degraded", 1, 90.0, 3.0, 2.0),
 ];
 
 #[test]

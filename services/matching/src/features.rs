@@ -140,13 +140,13 @@ impl OrbExtractor {
     }
 
     /// The feature budget of a `width` × `height` frame: `orb_features` up to 640 × 480,
-    /// then in proportion to the pixel count (at most 4×) when `orb_scale_with_area`.
+    /// then in proportion to the pixel count (at most 2×) when `orb_scale_with_area`.
     pub fn budget_for(&self, width: i32, height: i32) -> usize {
         if !self.scale_with_area {
             return self.budget;
         }
         let ratio = (width.max(0) as f64 * height.max(0) as f64) / (640.0 * 480.0);
-        (self.budget as f64 * ratio.clamp(1.0, 4.0)).round() as usize
+        (self.budget as f64 * ratio.clamp(1.0, 2.0)).round() as usize
     }
 
     /// ORB on a BGR or grey frame.
@@ -341,8 +341,8 @@ mod tests {
             base,
             "smaller frames keep the base budget"
         );
-        assert_eq!(orb.budget_for(1280, 720), 3 * base);
-        assert_eq!(orb.budget_for(8000, 6000), 4 * base, "capped at 4x");
+        assert_eq!(orb.budget_for(800, 600), (base as f64 * 1.5625).round() as usize);
+        assert_eq!(orb.budget_for(1280, 720), 2 * base, "capped at 2x");
         let fixed = OrbExtractor::new(&MatchingConfig {
             orb_scale_with_area: false,
             ..config

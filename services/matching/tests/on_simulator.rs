@@ -75,8 +75,14 @@ fn epipolar_transfer_lands_on_the_current_target_in_past_images() {
                     border_px: -1e9,
                     ..Default::default()
                 };
+                let bounds = matching::epipolar::ImageBounds {
+                    intrinsics: &sim.intrinsics(),
+                    distortion: &shared_types::lens::Distortion::NONE,
+                    width: 640,
+                    height: 480,
+                };
                 if let Ok(p) =
-                    matching::epipolar::transfer_point(&fl, det[0], &fr, det[1], 640, 480, &loose)
+                    matching::epipolar::transfer_point(&fl, det[0], &fr, det[1], &bounds, &loose)
                 {
                     true_f_errors
                         .push(((p[0] - truth[0]).powi(2) + (p[1] - truth[1]).powi(2)).sqrt());
