@@ -14,6 +14,10 @@ packages=(
 if ! { command -v python3 >/dev/null 2>&1 && python3 -m pip --version >/dev/null 2>&1; }; then
   packages+=(python3 python3-pip)
 fi
+# fetch_aerial.sh falls back to a venv (an older pip) when the system pip is too new.
+if ! python3 -c 'import ensurepip' >/dev/null 2>&1; then
+  packages+=(python3-venv)
+fi
 
 missing=()
 for p in "${packages[@]}"; do

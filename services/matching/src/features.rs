@@ -341,7 +341,10 @@ mod tests {
             base,
             "smaller frames keep the base budget"
         );
-        assert_eq!(orb.budget_for(800, 600), (base as f64 * 1.5625).round() as usize);
+        assert_eq!(
+            orb.budget_for(800, 600),
+            (base as f64 * 1.5625).round() as usize
+        );
         assert_eq!(orb.budget_for(1280, 720), 2 * base, "capped at 2x");
         let fixed = OrbExtractor::new(&MatchingConfig {
             orb_scale_with_area: false,
