@@ -6,7 +6,7 @@
 //! sunlit roof, whose centre is the recording format's target point (the centre of the
 //! vehicle's top face); the darker sides would pull the centroid sideways.
 
-use super::{check_bgr, DetectError, Detection, Detector, PartialViewConfig};
+use super::{check_bgr, DetectError, Detection, Detector, PartialViewConfig, TrackHint};
 use opencv::core as cv;
 use opencv::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -30,6 +30,15 @@ pub struct ColourBlobConfig {
     /// Dropping detections of a partly hidden target (`partial_view.rs`), applied per
     /// camera by whoever streams frames through the detector.
     pub partial_view: PartialViewConfig,
+    /// With a fresh hint (where this camera last saw the target,
+    /// [`ColourBlobDetector::detect_near`]), the blob nearest it within this share of
+    /// the image width (growing with the hint's age up to twice that at 0.2 s: at a
+    /// turn the target crosses ~50 px of a 640 px image in 0.1 s) is the target, and
+    /// no blob there is no detection (unless it is the only blob of the target's
+    /// colour in the frame): another
+    /// vehicle of the target's colour elsewhere in the frame is not taken for it. With a
+    /// stale hint, the nearest blob however far; without one, the largest.
+    pub track_radius_frac: f64,
 }
 
 impl Default for ColourBlobConfig {
@@ -42,6 +51,7 @@ impl Default for ColourBlobConfig {
             max_area_px: 20_000,
             adapt_to_exposure: true,
             partial_view: PartialViewConfig::default(),
+            track_radius_frac: 0.08,
         }
     }
 }
@@ -74,6 +84,9 @@ impl ColourBlobDetector {
             .partial_view
             .validate()
             .map_err(DetectError::Config)?;
+        if !(config.track_radius_frac > 0.0 && config.track_radius_frac <= 1.0) {
+            return Err(DetectError::Config("track_radius_frac must be in (0, 1]".into()));
+        }
         if config.min_area_px < 1 || config.max_area_px < config.min_area_px {
             return Err(DetectError::Config(
                 "need 1 <= min_area_px <= max_area_px".into(),
@@ -115,8 +128,13 @@ impl ColourBlobDetector {
         Ok(0)
     }
 
-    /// The largest blob of the target's colour with `value_min`, if any: (label, area).
-    fn largest_blob(&mut self, value_min: f64) -> Result<Option<(i32, i32)>, DetectError> {
+    /// The blob of the target's colour with `value_min`: the one nearest `near` within
+    /// `radius` px when there is a hint, else the largest; (label, area).
+    fn pick_blob(
+        &mut self,
+        value_min: f64,
+        near: Option<([f64; 2], f64)>,
+    ) -> Result<Option<(i32, i32)>, DetectError> {
         let c = &self.config;
         for (i, [lo, hi]) in c.hue_ranges.iter().enumerate() {
             let low = cv::Scalar::new(*lo as f64, c.saturation_min as f64, value_min, 0.0);
@@ -137,7 +155,10 @@ impl ColourBlobDetector {
             8,
             cv::CV_32S,
         )?;
-        let mut best: Option<(i32, i32)> = None; // (label, area)
+        // (label, area, score): the larger score wins.
+        let mut best: Option<(i32, i32, f64)> = None;
+        // The candidates, and the only one if there is just one.
+        let (mut candidates, mut only) = (0, None);
         for label in 1..n {
             let area = *self
                 .stats
@@ -145,25 +166,68 @@ impl ColourBlobDetector {
             if area < c.min_area_px || area > c.max_area_px {
                 continue;
             }
-            if best.is_none_or(|(_, a)| area > a) {
-                best = Some((label, area));
+            candidates += 1;
+            only = Some((label, area));
+            let score = match near {
+                Some((hint, radius)) => {
+                    let (x, y) = (
+                        *self.centroids.at_2d::<f64>(label, 0)?,
+                        *self.centroids.at_2d::<f64>(label, 1)?,
+                    );
+                    let d = ((x - hint[0]).powi(2) + (y - hint[1]).powi(2)).sqrt();
+                    if d > radius {
+                        continue;
+                    }
+                    -d
+                }
+                None => area as f64,
+            };
+            if best.is_none_or(|(_, _, s)| score > s) {
+                best = Some((label, area, score));
             }
         }
-        Ok(best)
+        // Nothing near the hint, but a single blob of the target's colour in the frame:
+        // nothing to confuse it with, so it is the target (the UAVs turning move it
+        // farther than the radius in one frame).
+        if best.is_none() && candidates == 1 {
+            return Ok(only);
+        }
+        Ok(best.map(|(label, area, _)| (label, area)))
     }
 }
 
 impl Detector for ColourBlobDetector {
     fn detect(&mut self, frame: &cv::Mat) -> Result<Option<Detection>, DetectError> {
+        self.detect_near(frame, None)
+    }
+}
+
+impl ColourBlobDetector {
+    /// [`Detector::detect`] with a hint: where this camera last saw the target (see
+    /// `track_radius_frac`).
+    pub fn detect_near(
+        &mut self,
+        frame: &cv::Mat,
+        hint: Option<TrackHint>,
+    ) -> Result<Option<Detection>, DetectError> {
         check_bgr(frame)?;
+        let near = hint.map(|h| {
+            let radius = if h.fresh {
+                let growth = (1.0 + h.age_s / 0.2).min(2.0);
+                self.config.track_radius_frac * frame.cols() as f64 * growth
+            } else {
+                f64::INFINITY
+            };
+            (h.centre, radius)
+        });
         opencv::imgproc::cvt_color_def(frame, &mut self.hsv, opencv::imgproc::COLOR_BGR2HSV)?;
         let value_min = self.config.value_min as f64;
-        let mut best = self.largest_blob(value_min)?;
+        let mut best = self.pick_blob(value_min, near)?;
         if best.is_none() && self.config.adapt_to_exposure {
             let exposure = self.bright_percentile()? as f64 / 255.0;
             if exposure < 0.95 {
                 self.exposure_retries += 1;
-                best = self.largest_blob((value_min * exposure).max(1.0))?;
+                best = self.pick_blob((value_min * exposure).max(1.0), near)?;
             }
         }
         let Some((label, area)) = best else {
@@ -312,5 +376,47 @@ mod tests {
         // A well-exposed frame is never retried.
         assert!(d.detect(&frame).unwrap().is_some());
         assert_eq!(d.exposure_retries(), 2);
+    }
+
+    #[test]
+    fn a_hint_keeps_the_target_when_a_same_coloured_car_is_in_view() {
+        // The target (left) and a larger car of its colour (right).
+        let mut frame = frame_with_rect(20, 30, 20, 9, [36.0, 28.0, 214.0]);
+        opencv::imgproc::rectangle(
+            &mut frame,
+            cv::Rect::new(110, 80, 24, 11),
+            cv::Scalar::new(36.0, 28.0, 214.0, 0.0),
+            -1,
+            opencv::imgproc::LINE_8,
+            0,
+        )
+        .unwrap();
+        let mut d = ColourBlobDetector::new(ColourBlobConfig::default()).unwrap();
+        // No hint: the largest.
+        let largest = d.detect_near(&frame, None).unwrap().unwrap();
+        assert_eq!(largest.bbox, [110.0, 80.0, 24.0, 11.0]);
+        // Hint near the target (12.8 px radius at 160 px width): the target.
+        let fresh = |centre| {
+            Some(TrackHint {
+                centre,
+                fresh: true,
+                age_s: 0.0,
+            })
+        };
+        let tracked = d.detect_near(&frame, fresh([32.0, 36.0])).unwrap().unwrap();
+        assert_eq!(tracked.bbox, [20.0, 30.0, 20.0, 9.0]);
+        // Hint where nothing is: no detection rather than either car.
+        assert!(d.detect_near(&frame, fresh([80.0, 10.0])).unwrap().is_none());
+        // A single blob far from the hint is taken: nothing to confuse it with.
+        let alone = frame_with_rect(20, 30, 20, 9, [36.0, 28.0, 214.0]);
+        assert!(d.detect_near(&alone, fresh([140.0, 100.0])).unwrap().is_some());
+        // A stale hint (the target hidden a while): the nearest, however far.
+        let stale = TrackHint {
+            centre: [60.0, 40.0],
+            fresh: false,
+            age_s: 3.0,
+        };
+        let back = d.detect_near(&frame, Some(stale)).unwrap().unwrap();
+        assert_eq!(back.bbox, [20.0, 30.0, 20.0, 9.0]);
     }
 }

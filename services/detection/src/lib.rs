@@ -10,7 +10,7 @@ mod partial_view;
 pub mod yolo;
 
 pub use colour_blob::{ColourBlobConfig, ColourBlobDetector};
-pub use partial_view::{PartialViewConfig, PartialViewGuard};
+pub use partial_view::{PartialViewConfig, PartialViewGuard, TrackHint};
 
 use opencv::core as cv;
 

@@ -12,7 +12,7 @@
 use anyhow::{Context, Result};
 use clap::Parser;
 use detection::frame_view::frame_mat;
-use detection::{ColourBlobConfig, ColourBlobDetector, Detector, PartialViewGuard};
+use detection::{ColourBlobConfig, ColourBlobDetector, PartialViewGuard};
 use shared_types::clock::{elapsed_us, monotonic_ns};
 use shared_types::conventions::Uav;
 use shared_types::messages::DetectionMsg;
@@ -63,7 +63,7 @@ fn main() -> Result<()> {
                 stats.count("frames", 1);
                 stats.count("frames_lost", gaps[uav].see(header.seq));
                 let found = match frame_mat(&header, sample.payload()) {
-                    Ok(mat) => match detector.detect(&mat) {
+                    Ok(mat) => match detector.detect_near(&mat, guards[uav].hint(header.t_s)) {
                         Ok(d) => d,
                         Err(e) => {
                             tracing::warn!(seq = header.seq, uav, "detector failed: {e}");

@@ -11,6 +11,7 @@
 //! change of scale costs that long at most.
 
 use crate::Detection;
+
 use serde::{Deserialize, Serialize};
 
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -61,6 +62,21 @@ pub struct PartialViewGuard {
     config: PartialViewConfig,
     /// Reference long side, pixels, and when a detection was last accepted.
     reference: Option<(f64, f64)>,
+    /// Where the target was last seen (accepted or partly hidden), pixels, and when.
+    last_seen: Option<([f64; 2], f64)>,
+}
+
+/// Where to look for the target (see [`PartialViewGuard::hint`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TrackHint {
+    pub centre: [f64; 2],
+    /// Seen within `reseed_after_s`: look only near `centre`. Otherwise the track is
+    /// stale: take the blob nearest `centre`, however far (after an occlusion the
+    /// target reappears near where it vanished; a car of its colour elsewhere is
+    /// farther).
+    pub fresh: bool,
+    /// Seconds since the target was last seen.
+    pub age_s: f64,
 }
 
 impl PartialViewGuard {
@@ -68,7 +84,19 @@ impl PartialViewGuard {
         Self {
             config,
             reference: None,
+            last_seen: None,
         }
+    }
+
+    /// Where this camera last saw the target (whole or partly hidden): the hint for
+    /// [`crate::ColourBlobDetector::detect_near`], so another vehicle of the target's
+    /// colour is not taken for it. `None` before the first detection.
+    pub fn hint(&self, t_s: f64) -> Option<TrackHint> {
+        self.last_seen.map(|(centre, at)| TrackHint {
+            centre,
+            fresh: t_s - at <= self.config.reseed_after_s,
+            age_s: (t_s - at).max(0.0),
+        })
     }
 
     /// Whether `detection` at `t_s` looks like the whole target (keep it) or like a part
@@ -78,7 +106,10 @@ impl PartialViewGuard {
         if !(size.is_finite() && size > 0.0 && t_s.is_finite()) {
             return false;
         }
+        // The detector found it near the hint: the track follows, whole or not.
+        self.last_seen = Some((detection.centre, t_s));
         if self.config.min_size_ratio <= 0.0 {
+            self.reference = Some((size, t_s));
             return true;
         }
         let seeded = match self.reference {
@@ -164,5 +195,18 @@ mod tests {
         }
         .validate()
         .is_err());
+    }
+
+    #[test]
+    fn the_hint_follows_the_target_whole_or_partial_and_goes_stale() {
+        let mut guard = PartialViewGuard::new(PartialViewConfig::default());
+        assert_eq!(guard.hint(0.0), None);
+        assert!(guard.accept(0.0, &box_of(20.0)));
+        let hint = |centre, fresh, age_s| Some(TrackHint { centre, fresh, age_s });
+        assert_eq!(guard.hint(0.5), hint([110.0, 100.0], true, 0.5));
+        // A partial view is dropped, but the track follows it.
+        assert!(!guard.accept(0.6, &Detection { centre: [120.0, 104.0], ..box_of(5.0) }));
+        assert_eq!(guard.hint(1.6), hint([120.0, 104.0], true, 1.0));
+        assert_eq!(guard.hint(2.7), hint([120.0, 104.0], false, 2.1));
     }
 }

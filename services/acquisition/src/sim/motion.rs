@@ -204,6 +204,8 @@ pub struct FlightSpec {
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct TrueState {
     pub t_s: f64,
+    /// The vehicle's arc length along its route, metres.
+    pub vehicle_s_m: f64,
     pub vehicle_xy: [f64; 2],
     pub vehicle_heading: f64,
     /// Per UAV (left, right): ENU position and (yaw, pitch, roll) in radians.
@@ -243,6 +245,11 @@ impl Motion {
             history: Vec::new(),
             dt,
         }
+    }
+
+    /// The route the vehicle (and any traffic) drives.
+    pub fn route(&self) -> &Route {
+        &self.route
     }
 
     /// The state now, then advances one frame period.
@@ -286,6 +293,7 @@ impl Motion {
         }
         TrueState {
             t_s: self.t,
+            vehicle_s_m: self.s,
             vehicle_xy: [p.x, p.y],
             vehicle_heading: h,
             uav_position,

@@ -86,6 +86,17 @@ pub enum Surface {
     Wall,
     VehicleTop,
     VehicleSide,
+    /// Another vehicle (traffic, a distractor).
+    Traffic,
+}
+
+/// Another vehicle on the roads: a box like the target's, in its own colour (the
+/// target's red makes it a distractor for the detector). Its top is `top_bgr`, its sides
+/// the same colour darkened as the target's are.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TrafficBox {
+    pub body: VehicleBox,
+    pub top_bgr: [u8; 3],
 }
 
 /// The vehicle's colours (BGR): a saturated red nothing else in the town uses.
@@ -105,6 +116,13 @@ enum Material {
     },
     VehicleTop,
     VehicleSide {
+        light: f32,
+    },
+    TrafficTop {
+        bgr: [u8; 3],
+    },
+    TrafficSide {
+        bgr: [u8; 3],
         light: f32,
     },
 }
@@ -148,6 +166,19 @@ impl Renderer {
         out: &mut [u8],
         stride: usize,
     ) {
+        self.render_with_traffic(city, vehicle, &[], view, out, stride)
+    }
+
+    /// [`Renderer::render`] with other vehicles on the roads.
+    pub fn render_with_traffic(
+        &mut self,
+        city: &City,
+        vehicle: Option<&VehicleBox>,
+        traffic: &[TrafficBox],
+        view: &CameraView,
+        out: &mut [u8],
+        stride: usize,
+    ) {
         let (w, h) = (view.width as usize, view.height as usize);
         assert!(
             stride >= 3 * w && out.len() >= stride * (h - 1) + 3 * w,
@@ -159,6 +190,14 @@ impl Renderer {
         self.label.clear();
         self.label.resize(w * h, GROUND_LABEL);
         self.collect_faces(city, vehicle, view);
+        for t in traffic {
+            let top = Material::TrafficTop { bgr: t.top_bgr };
+            let bgr = t.top_bgr;
+            let zg = city.config.ground_z_m;
+            self.push_box(&t.body, zg, view.position, top, |light| {
+                Material::TrafficSide { bgr, light }
+            });
+        }
         let basis = view.ray_basis();
         for index in 0..self.faces.len() {
             self.rasterise(index, view, &basis);
@@ -175,6 +214,7 @@ impl Renderer {
                 Material::Wall { .. } => Surface::Wall,
                 Material::VehicleTop => Surface::VehicleTop,
                 Material::VehicleSide { .. } => Surface::VehicleSide,
+                Material::TrafficTop { .. } | Material::TrafficSide { .. } => Surface::Traffic,
             },
         }
     }
@@ -231,47 +271,59 @@ impl Renderer {
             }
         }
         if let Some(v) = vehicle {
-            // Forward and right unit vectors in ENU for a heading from north.
-            let f = Vector3::new(v.heading.sin(), v.heading.cos(), 0.0);
-            let r = Vector3::new(v.heading.cos(), -v.heading.sin(), 0.0);
-            let (hl, hw) = (v.length_m / 2.0, v.width_m / 2.0);
-            let base = Point3::new(v.x, v.y, zg);
-            let corner =
-                |sf: f64, sr: f64, z: f64| base + f * (sf * hl) + r * (sr * hw) + Vector3::z() * z;
-            let top = v.height_m;
+            self.push_box(v, zg, cam, Material::VehicleTop, |light| {
+                Material::VehicleSide { light }
+            });
+        }
+    }
+
+    /// The top and the camera-facing sides of a vehicle box.
+    fn push_box(
+        &mut self,
+        v: &VehicleBox,
+        ground_z: f64,
+        camera: Point3<f64>,
+        top_material: Material,
+        side_material: impl Fn(f32) -> Material,
+    ) {
+        // Forward and right unit vectors in ENU for a heading from north.
+        let f = Vector3::new(v.heading.sin(), v.heading.cos(), 0.0);
+        let r = Vector3::new(v.heading.cos(), -v.heading.sin(), 0.0);
+        let (hl, hw) = (v.length_m / 2.0, v.width_m / 2.0);
+        let base = Point3::new(v.x, v.y, ground_z);
+        let corner =
+            |sf: f64, sr: f64, z: f64| base + f * (sf * hl) + r * (sr * hw) + Vector3::z() * z;
+        let top = v.height_m;
+        self.faces.push(Face {
+            corners: [
+                corner(1.0, 1.0, top),
+                corner(-1.0, 1.0, top),
+                corner(-1.0, -1.0, top),
+                corner(1.0, -1.0, top),
+            ],
+            normal: Vector3::z(),
+            material: top_material,
+        });
+        let sides = [
+            ((1.0, 1.0), (1.0, -1.0), f),
+            ((-1.0, 1.0), (1.0, 1.0), r),
+            ((-1.0, -1.0), (-1.0, 1.0), -f),
+            ((1.0, -1.0), (-1.0, -1.0), -r),
+        ];
+        for ((af, ar), (bf, br), n) in sides {
+            if n.dot(&(camera - corner(af, ar, 0.0))) <= 0.0 {
+                continue;
+            }
             self.faces.push(Face {
                 corners: [
-                    corner(1.0, 1.0, top),
-                    corner(-1.0, 1.0, top),
-                    corner(-1.0, -1.0, top),
-                    corner(1.0, -1.0, top),
+                    corner(af, ar, 0.0),
+                    corner(bf, br, 0.0),
+                    corner(bf, br, top),
+                    corner(af, ar, top),
                 ],
-                normal: Vector3::z(),
-                material: Material::VehicleTop,
+                normal: n,
+                material: side_material(light_for(n)),
             });
-            let sides = [
-                ((1.0, 1.0), (1.0, -1.0), f),
-                ((-1.0, 1.0), (1.0, 1.0), r),
-                ((-1.0, -1.0), (-1.0, 1.0), -f),
-                ((1.0, -1.0), (-1.0, -1.0), -r),
-            ];
-            for ((af, ar), (bf, br), n) in sides {
-                if n.dot(&(cam - corner(af, ar, 0.0))) <= 0.0 {
-                    continue;
-                }
-                self.faces.push(Face {
-                    corners: [
-                        corner(af, ar, 0.0),
-                        corner(bf, br, 0.0),
-                        corner(bf, br, top),
-                        corner(af, ar, top),
-                    ],
-                    normal: n,
-                    material: Material::VehicleSide {
-                        light: light_for(n),
-                    },
-                });
-            }
         }
     }
 
@@ -409,6 +461,9 @@ fn shade_face(city: &City, material: &Material, p: Vector3<f64>, zg: f64) -> [f3
         }
         Material::VehicleTop => VEHICLE_TOP_BGR.map(f32::from),
         Material::VehicleSide { light } => VEHICLE_SIDE_BGR.map(|c| c as f32 * light),
+        Material::TrafficTop { bgr } => bgr.map(f32::from),
+        // Sides darkened like the target's (140/214 of the top), then lit.
+        Material::TrafficSide { bgr, light } => bgr.map(|c| c as f32 * 0.65 * light),
     }
 }
 

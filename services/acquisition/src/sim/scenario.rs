@@ -45,9 +45,40 @@ pub struct SimConfig {
     /// Decks (bridges, canopies) the target drives under and disappears.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub occluders: Vec<Occluder>,
+    /// Other vehicles on the target's route (distractors for the detector).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub traffic: Vec<TrafficCar>,
     /// What the camera does to the image after the lens (all off by default).
     #[serde(default, skip_serializing_if = "ImageEffects::is_identity")]
     pub image: ImageEffects,
+}
+
+/// A vehicle driving the target's route, starting `lead_m` ahead of it (negative:
+/// behind) in a lane `lane_m` to the right of the target's path, at `speed_factor` ×
+/// the target's speed (so it can overtake or fall behind). Its roof is `colour_bgr`:
+/// the target's own red ([36, 28, 214]) makes it a distractor.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TrafficCar {
+    pub lead_m: f64,
+    #[serde(default)]
+    pub lane_m: f64,
+    #[serde(default = "one")]
+    pub speed_factor: f64,
+    pub colour_bgr: [u8; 3],
+}
+
+fn one() -> f64 {
+    1.0
+}
+
+impl TrafficCar {
+    pub fn is_valid(&self) -> bool {
+        self.lead_m.is_finite()
+            && self.lane_m.is_finite()
+            && self.lane_m.abs() < 20.0
+            && (0.0..=5.0).contains(&self.speed_factor)
+    }
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -100,6 +131,9 @@ impl SimConfig {
             ));
         }
         self.image.validate()?;
+        if !self.traffic.iter().all(TrafficCar::is_valid) {
+            return bad("traffic needs finite lead_m and lane_m, |lane_m| < 20, 0 <= speed_factor <= 5".into());
+        }
         if !self.occluders.iter().all(Occluder::is_valid) {
             return bad("occluders need finite centres, sizes > 0 and height_m > 0".into());
         }

@@ -4,7 +4,7 @@
 use super::city::City;
 use super::lens::LensMap;
 use super::motion::{Motion, Route, TrueState};
-use super::render::{CameraView, Renderer, Surface, VehicleBox};
+use super::render::{CameraView, Renderer, Surface, TrafficBox, VehicleBox};
 use super::scenario::SimConfig;
 use super::SimError;
 use nalgebra::Point3;
@@ -52,6 +52,10 @@ pub struct Simulator {
     renderers: [Renderer; 2],
     /// A distorted camera's resampling map, with each UAV's pinhole canvas.
     lens: Option<(Arc<LensMap>, [Vec<u8>; 2])>,
+    /// The traffic at the last [`Simulator::step`] (rendered with it), and the target's
+    /// arc length at the first step (traffic moves relative to it).
+    traffic: Vec<TrafficBox>,
+    start_s_m: Option<f64>,
 }
 
 impl Simulator {
@@ -97,6 +101,8 @@ impl Simulator {
         };
         Ok(Self {
             lens,
+            traffic: Vec::new(),
+            start_s_m: None,
             intrinsics: Intrinsics::from_hfov(c.width, c.height, c.hfov_deg),
             rng: StdRng::seed_from_u64(config.seed),
             noise: [
@@ -153,6 +159,28 @@ impl Simulator {
             height_m: v.height_m,
         };
         let target = vehicle.top_centre(self.config.city.ground_z_m);
+        let start = *self.start_s_m.get_or_insert(state.vehicle_s_m);
+        let travelled = state.vehicle_s_m - start;
+        let route = self.motion.route();
+        self.traffic = self
+            .config
+            .traffic
+            .iter()
+            .map(|car| {
+                let s = start + car.lead_m + car.speed_factor * travelled;
+                let (p, heading) = route.at(s);
+                let right = [heading.cos(), -heading.sin()];
+                TrafficBox {
+                    body: VehicleBox {
+                        x: p.x + right[0] * car.lane_m,
+                        y: p.y + right[1] * car.lane_m,
+                        heading,
+                        ..vehicle
+                    },
+                    top_bgr: car.colour_bgr,
+                }
+            })
+            .collect();
         let frames = [Uav::Left, Uav::Right].map(|uav| self.frame(&state, uav, target));
         self.seq += 1;
         Some(SimStep { frames, vehicle })
@@ -210,6 +238,7 @@ impl Simulator {
             &mut self.renderers[i],
             &self.city,
             step,
+            &self.traffic,
             uav,
             canvas,
             out,
@@ -232,9 +261,10 @@ impl Simulator {
             Some((map, [cl, cr])) => (Some((map.clone(), cl)), Some((map.clone(), cr))),
             None => (None, None),
         };
+        let traffic = &self.traffic;
         std::thread::scope(|s| {
-            s.spawn(|| render_view(rl, city, step, Uav::Left, cl, left, stride));
-            render_view(rr, city, step, Uav::Right, cr, right, stride);
+            s.spawn(|| render_view(rl, city, step, traffic, Uav::Left, cl, left, stride));
+            render_view(rr, city, step, traffic, Uav::Right, cr, right, stride);
         });
         self.degrade(step, Uav::Left, left, stride);
         self.degrade(step, Uav::Right, right, stride);
@@ -287,10 +317,12 @@ impl Simulator {
 
 /// Renders `uav`'s view of `step`: straight into `out`, or into the pinhole canvas and
 /// then through the lens map.
+#[allow(clippy::too_many_arguments)]
 fn render_view(
     renderer: &mut Renderer,
     city: &City,
     step: &SimStep,
+    traffic: &[TrafficBox],
     uav: Uav,
     canvas: Option<(Arc<LensMap>, &mut Vec<u8>)>,
     out: &mut [u8],
@@ -298,7 +330,7 @@ fn render_view(
 ) {
     let view = &step.frames[uav.index()].view;
     match canvas {
-        None => renderer.render(city, Some(&step.vehicle), view, out, stride),
+        None => renderer.render_with_traffic(city, Some(&step.vehicle), traffic, view, out, stride),
         Some((map, pixels)) => {
             let canvas_view = CameraView {
                 intrinsics: map.canvas_intrinsics(&view.intrinsics),
@@ -306,9 +338,10 @@ fn render_view(
                 height: map.canvas[1] as u32,
                 ..*view
             };
-            renderer.render(
+            renderer.render_with_traffic(
                 city,
                 Some(&step.vehicle),
+                traffic,
                 &canvas_view,
                 pixels,
                 3 * map.canvas[0],

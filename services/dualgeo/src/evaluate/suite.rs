@@ -14,7 +14,7 @@
 use super::noise::{estimator_for, Calibration, MethodErrors};
 use acquisition::sim::{Presets, SimConfig, Simulator};
 use anyhow::{Context, Result};
-use detection::{ColourBlobConfig, ColourBlobDetector, Detector, PartialViewGuard};
+use detection::{ColourBlobConfig, ColourBlobDetector, PartialViewGuard};
 use geolocation::{
     estimate_set, geolocate_filtered, EstimatorConfig, EstimatorMethod, ImageId, Observation,
     TemporalEstimator,
@@ -29,7 +29,7 @@ use shared_types::nav_noise::{BiasModel, NavNoise};
 use std::collections::BTreeMap;
 
 /// The suite's scenes, in the order of the table.
-pub const SUITE: [&str; 9] = [
+pub const SUITE: [&str; 10] = [
     "suite_town",
     "suite_downtown",
     "suite_suburban",
@@ -39,6 +39,7 @@ pub const SUITE: [&str; 9] = [
     "suite_high_hd",
     "suite_wide_lens",
     "suite_degraded",
+    "suite_traffic",
 ];
 
 /// Seconds before errors count (the temporal filter's warm-up, and the rings filling).
@@ -164,11 +165,11 @@ pub fn run_scene(
         }
         let detections = [
             detector
-                .detect(&images[0])?
+                .detect_near(&images[0], guards[0].hint(step.frames[0].t_s))?
                 .filter(|d| guards[0].accept(step.frames[0].t_s, d))
                 .map(|d| d.centre),
             detector
-                .detect(&images[1])?
+                .detect_near(&images[1], guards[1].hint(step.frames[1].t_s))?
                 .filter(|d| guards[1].accept(step.frames[1].t_s, d))
                 .map(|d| d.centre),
         ];

@@ -5,7 +5,7 @@
 
 use acquisition::sim::{Presets, Simulator};
 use anyhow::Result;
-use detection::{ColourBlobConfig, ColourBlobDetector, Detector, PartialViewGuard};
+use detection::{ColourBlobConfig, ColourBlobDetector, PartialViewGuard};
 use geolocation::EstimatorConfig;
 use matching::{ChainOutcome, FrameInput, MatchingConfig, VisionChain};
 use nalgebra::Point3;
@@ -103,7 +103,7 @@ pub fn run(every: u64, progress: &indicatif::ProgressBar) -> Result<VisionPass> 
                     pose: f.measured,
                     image,
                     detection: detector
-                        .detect(image)?
+                        .detect_near(image, guard.hint(f.t_s))?
                         .filter(|d| guard.accept(f.t_s, d))
                         .map(|d| d.centre),
                     intrinsics: sim.intrinsics(),
