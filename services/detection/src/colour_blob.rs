@@ -85,7 +85,9 @@ impl ColourBlobDetector {
             .validate()
             .map_err(DetectError::Config)?;
         if !(config.track_radius_frac > 0.0 && config.track_radius_frac <= 1.0) {
-            return Err(DetectError::Config("track_radius_frac must be in (0, 1]".into()));
+            return Err(DetectError::Config(
+                "track_radius_frac must be in (0, 1]".into(),
+            ));
         }
         if config.min_area_px < 1 || config.max_area_px < config.min_area_px {
             return Err(DetectError::Config(
@@ -406,10 +408,16 @@ mod tests {
         let tracked = d.detect_near(&frame, fresh([32.0, 36.0])).unwrap().unwrap();
         assert_eq!(tracked.bbox, [20.0, 30.0, 20.0, 9.0]);
         // Hint where nothing is: no detection rather than either car.
-        assert!(d.detect_near(&frame, fresh([80.0, 10.0])).unwrap().is_none());
+        assert!(d
+            .detect_near(&frame, fresh([80.0, 10.0]))
+            .unwrap()
+            .is_none());
         // A single blob far from the hint is taken: nothing to confuse it with.
         let alone = frame_with_rect(20, 30, 20, 9, [36.0, 28.0, 214.0]);
-        assert!(d.detect_near(&alone, fresh([140.0, 100.0])).unwrap().is_some());
+        assert!(d
+            .detect_near(&alone, fresh([140.0, 100.0]))
+            .unwrap()
+            .is_some());
         // A stale hint (the target hidden a while): the nearest, however far.
         let stale = TrackHint {
             centre: [60.0, 40.0],

@@ -202,10 +202,22 @@ mod tests {
         let mut guard = PartialViewGuard::new(PartialViewConfig::default());
         assert_eq!(guard.hint(0.0), None);
         assert!(guard.accept(0.0, &box_of(20.0)));
-        let hint = |centre, fresh, age_s| Some(TrackHint { centre, fresh, age_s });
+        let hint = |centre, fresh, age_s| {
+            Some(TrackHint {
+                centre,
+                fresh,
+                age_s,
+            })
+        };
         assert_eq!(guard.hint(0.5), hint([110.0, 100.0], true, 0.5));
         // A partial view is dropped, but the track follows it.
-        assert!(!guard.accept(0.6, &Detection { centre: [120.0, 104.0], ..box_of(5.0) }));
+        assert!(!guard.accept(
+            0.6,
+            &Detection {
+                centre: [120.0, 104.0],
+                ..box_of(5.0)
+            }
+        ));
         assert_eq!(guard.hint(1.6), hint([120.0, 104.0], true, 1.0));
         assert_eq!(guard.hint(2.7), hint([120.0, 104.0], false, 2.1));
     }

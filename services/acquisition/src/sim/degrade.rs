@@ -138,7 +138,13 @@ mod tests {
 
     fn stripes(w: usize, h: usize) -> Vec<u8> {
         (0..w * h * 3)
-            .map(|i| if ((i / 3 % w) / 4).is_multiple_of(2) { 40 } else { 200 })
+            .map(|i| {
+                if ((i / 3 % w) / 4).is_multiple_of(2) {
+                    40
+                } else {
+                    200
+                }
+            })
             .collect()
     }
 

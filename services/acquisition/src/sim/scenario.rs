@@ -132,7 +132,10 @@ impl SimConfig {
         }
         self.image.validate()?;
         if !self.traffic.iter().all(TrafficCar::is_valid) {
-            return bad("traffic needs finite lead_m and lane_m, |lane_m| < 20, 0 <= speed_factor <= 5".into());
+            return bad(
+                "traffic needs finite lead_m and lane_m, |lane_m| < 20, 0 <= speed_factor <= 5"
+                    .into(),
+            );
         }
         if !self.occluders.iter().all(Occluder::is_valid) {
             return bad("occluders need finite centres, sizes > 0 and height_m > 0".into());
