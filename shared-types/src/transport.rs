@@ -316,6 +316,68 @@ mod tests {
         assert_eq!(frame_segment_bytes(1000), 14 * (1000 + 48 + 176));
     }
 
+    /// Every file under `dirs` (recursively), with its permission bits.
+    fn files_with_modes(dirs: &[&str]) -> std::collections::BTreeMap<std::path::PathBuf, u32> {
+        use std::os::unix::fs::PermissionsExt;
+        let mut out = std::collections::BTreeMap::new();
+        let mut stack: Vec<std::path::PathBuf> = dirs.iter().map(Into::into).collect();
+        while let Some(dir) = stack.pop() {
+            let Ok(entries) = std::fs::read_dir(&dir) else {
+                continue;
+            };
+            for entry in entries.flatten() {
+                // Files of other tests may vanish between the listing and the stat.
+                let Ok(meta) = entry.metadata() else {
+                    continue;
+                };
+                if meta.is_dir() {
+                    stack.push(entry.path());
+                } else {
+                    out.insert(entry.path(), meta.permissions().mode() & 0o777);
+                }
+            }
+        }
+        out
+    }
+
+    /// Issue #13, item 8: the shared memory and the files iceoryx2 creates for a run
+    /// (segments in /dev/shm, service and node records under /tmp/iceoryx2) are the
+    /// owner's only: no group or other bit. Another user on the ground station can
+    /// neither read the frames nor inject a pose.
+    #[test]
+    fn shared_memory_and_service_files_are_owner_only() {
+        let dirs = ["/dev/shm", "/tmp/iceoryx2"];
+        let before = files_with_modes(&dirs);
+        let run = new_run_id();
+        let a = Endpoint::new(&run, "perm-a").unwrap();
+        let _publisher = a.publisher::<DetectionMsg>(Topic::Detections).unwrap();
+        let _subscriber = a.subscriber::<DetectionMsg>(Topic::Detections).unwrap();
+        let _frames = a.frame_publisher(Uav::Left, 64 * 48 * 3).unwrap();
+        let _notifier = a.notifier(Stage::Matching).unwrap();
+        let _listener = a.listener(Stage::Matching).unwrap();
+        let after = files_with_modes(&dirs);
+        // One exception, measured and stated: iceoryx2 0.10's host-wide
+        // `iox2_*_node.*.global_mgmt` (16 bytes, created once per host by the first
+        // node of any user, then kept) is 0666. It is not per run and holds no frame or
+        // pose; whether it is already there depends on what ran before, so it is
+        // excluded rather than left to make this test order-dependent.
+        let host_wide = |p: &std::path::Path| {
+            p.file_name()
+                .and_then(|n| n.to_str())
+                .is_some_and(|n| n.ends_with(".global_mgmt"))
+        };
+        let created: Vec<_> = after
+            .iter()
+            .filter(|(p, _)| !before.contains_key(*p) && !host_wide(p))
+            .collect();
+        assert!(!created.is_empty(), "no iceoryx2 file seen in {dirs:?}");
+        let open: Vec<_> = created
+            .iter()
+            .filter(|(_, mode)| **mode & 0o077 != 0)
+            .collect();
+        assert!(open.is_empty(), "readable by others: {open:?}");
+    }
+
     #[test]
     fn message_round_trip_with_a_wake_up() {
         let run = new_run_id();
