@@ -263,6 +263,10 @@ impl ColourBlobDetector {
 mod tests {
     use super::*;
 
+    fn draw_rect(m: &mut cv::Mat, rect: cv::Rect, colour: cv::Scalar) {
+        opencv::imgproc::rectangle(m, rect, colour, -1, opencv::imgproc::LINE_8, 0).unwrap();
+    }
+
     fn frame_with_rect(x: i32, y: i32, w: i32, h: i32, bgr: [f64; 3]) -> cv::Mat {
         let mut m = cv::Mat::new_rows_cols_with_default(
             120,
@@ -271,15 +275,11 @@ mod tests {
             cv::Scalar::new(90.0, 110.0, 95.0, 0.0),
         )
         .unwrap();
-        opencv::imgproc::rectangle(
+        draw_rect(
             &mut m,
             cv::Rect::new(x, y, w, h),
             cv::Scalar::new(bgr[0], bgr[1], bgr[2], 0.0),
-            -1,
-            opencv::imgproc::LINE_8,
-            0,
-        )
-        .unwrap();
+        );
         m
     }
 
@@ -303,15 +303,11 @@ mod tests {
         // A dark side in a well-exposed frame (a white roof sets the exposure), so the
         // exposure retry keeps the threshold where it is.
         let mut side = frame_with_rect(40, 30, 20, 9, [24.0, 18.0, 140.0]);
-        opencv::imgproc::rectangle(
+        draw_rect(
             &mut side,
             cv::Rect::new(100, 60, 30, 30),
             cv::Scalar::all(250.0),
-            -1,
-            opencv::imgproc::LINE_8,
-            0,
-        )
-        .unwrap();
+        );
         assert!(d.detect(&side).unwrap().is_none());
         let gray =
             cv::Mat::new_rows_cols_with_default(10, 10, cv::CV_8UC1, cv::Scalar::all(0.0)).unwrap();
@@ -337,15 +333,11 @@ mod tests {
     fn an_under_exposed_camera_still_finds_the_target_but_not_its_dark_sides() {
         // A bright white patch (a roof) sets the frame's exposure.
         let mut frame = frame_with_rect(40, 30, 20, 9, [36.0, 28.0, 214.0]);
-        opencv::imgproc::rectangle(
+        draw_rect(
             &mut frame,
             cv::Rect::new(100, 60, 30, 30),
             cv::Scalar::all(250.0),
-            -1,
-            opencv::imgproc::LINE_8,
-            0,
-        )
-        .unwrap();
+        );
         let dark = darkened(&frame, 0.6);
         let strict = ColourBlobConfig {
             adapt_to_exposure: false,
@@ -365,15 +357,11 @@ mod tests {
         assert_eq!(d.exposure_retries(), 1);
         // The dark side of the same darkened frame stays below the scaled threshold.
         let mut side = frame_with_rect(40, 30, 20, 9, [24.0, 18.0, 140.0]);
-        opencv::imgproc::rectangle(
+        draw_rect(
             &mut side,
             cv::Rect::new(100, 60, 30, 30),
             cv::Scalar::all(250.0),
-            -1,
-            opencv::imgproc::LINE_8,
-            0,
-        )
-        .unwrap();
+        );
         assert!(d.detect(&darkened(&side, 0.6)).unwrap().is_none());
         // A well-exposed frame is never retried.
         assert!(d.detect(&frame).unwrap().is_some());
@@ -384,15 +372,11 @@ mod tests {
     fn a_hint_keeps_the_target_when_a_same_coloured_car_is_in_view() {
         // The target (left) and a larger car of its colour (right).
         let mut frame = frame_with_rect(20, 30, 20, 9, [36.0, 28.0, 214.0]);
-        opencv::imgproc::rectangle(
+        draw_rect(
             &mut frame,
             cv::Rect::new(110, 80, 24, 11),
             cv::Scalar::new(36.0, 28.0, 214.0, 0.0),
-            -1,
-            opencv::imgproc::LINE_8,
-            0,
-        )
-        .unwrap();
+        );
         let mut d = ColourBlobDetector::new(ColourBlobConfig::default()).unwrap();
         // No hint: the largest.
         let largest = d.detect_near(&frame, None).unwrap().unwrap();

@@ -7,10 +7,12 @@
 mod colour_blob;
 pub mod frame_view;
 mod partial_view;
+mod tracked;
 pub mod yolo;
 
 pub use colour_blob::{ColourBlobConfig, ColourBlobDetector};
 pub use partial_view::{PartialViewConfig, PartialViewGuard, TrackHint};
+pub use tracked::{TrackCounts, TrackedDetector};
 
 use opencv::core as cv;
 

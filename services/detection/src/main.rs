@@ -7,12 +7,12 @@
 //! Counters: `frames`, `found`, `frames_lost` (sequence gaps: overwritten while busy),
 //! `bad_frames`, `exposure_retries` (frames looked at again with the exposure-scaled
 //! brightness floor), `partial_view_dropped` (detections of a partly hidden target,
-//! dropped by the per-camera [`PartialViewGuard`]).
+//! dropped by the per-camera track of [`TrackedDetector`]).
 
 use anyhow::{Context, Result};
 use clap::Parser;
 use detection::frame_view::frame_mat;
-use detection::{ColourBlobConfig, ColourBlobDetector, PartialViewGuard};
+use detection::{ColourBlobConfig, TrackedDetector};
 use shared_types::clock::{elapsed_us, monotonic_ns};
 use shared_types::conventions::Uav;
 use shared_types::messages::DetectionMsg;
@@ -32,9 +32,7 @@ fn main() -> Result<()> {
     let args = Args::parse();
     init_tracing("detection");
     let config: ColourBlobConfig = load_section(args.service.config.as_deref(), "detection")?;
-    let mut guards = [PartialViewGuard::new(config.partial_view); 2];
-    let mut detector = ColourBlobDetector::new(config).context("detector configuration")?;
-    let mut exposure_retries = 0;
+    let mut detector = TrackedDetector::new(config).context("detector configuration")?;
     let endpoint = Endpoint::new(&args.service.run_id, "detection")?;
     let frames = [
         endpoint.frame_subscriber(Uav::Left)?,
@@ -63,7 +61,7 @@ fn main() -> Result<()> {
                 stats.count("frames", 1);
                 stats.count("frames_lost", gaps[uav].see(header.seq));
                 let found = match frame_mat(&header, sample.payload()) {
-                    Ok(mat) => match detector.detect_near(&mat, guards[uav].hint(header.t_s)) {
+                    Ok(mat) => match detector.detect(uav, header.t_s, &mat) {
                         Ok(d) => d,
                         Err(e) => {
                             tracing::warn!(seq = header.seq, uav, "detector failed: {e}");
@@ -85,18 +83,9 @@ fn main() -> Result<()> {
                     uav: header.uav,
                     ..Default::default()
                 };
-                let found = found.filter(|d| {
-                    let whole = guards[uav].accept(header.t_s, d);
-                    if !whole {
-                        stats.count("partial_view_dropped", 1);
-                    }
-                    whole
-                });
-                stats.count(
-                    "exposure_retries",
-                    detector.exposure_retries() - exposure_retries,
-                );
-                exposure_retries = detector.exposure_retries();
+                let counts = detector.take_counts();
+                stats.count("exposure_retries", counts.exposure_retries);
+                stats.count("partial_view_dropped", counts.partial_view_dropped);
                 if let Some(d) = found {
                     stats.count("found", 1);
                     msg.found = 1;

@@ -14,7 +14,7 @@
 use super::noise::{estimator_for, Calibration, MethodErrors};
 use acquisition::sim::{Presets, SimConfig, Simulator};
 use anyhow::{Context, Result};
-use detection::{ColourBlobConfig, ColourBlobDetector, PartialViewGuard};
+use detection::{ColourBlobConfig, TrackedDetector};
 use geolocation::{
     estimate_set, geolocate_filtered, EstimatorConfig, EstimatorMethod, ImageId, Observation,
     TemporalEstimator,
@@ -124,9 +124,7 @@ pub fn run_scene(
     let (w, h) = (config.camera.width as i32, config.camera.height as i32);
     let mut sim = Simulator::new(config.clone())?;
     progress.set_length(progress.length().unwrap_or(0) + sim.frame_count() / every);
-    let detector_config = ColourBlobConfig::default();
-    let mut guards = [PartialViewGuard::new(detector_config.partial_view); 2];
-    let mut detector = ColourBlobDetector::new(detector_config)?;
+    let mut detector = TrackedDetector::new(ColourBlobConfig::default())?;
     let mut lanes = (0..2)
         .map(|p| {
             let estimator = estimator_for(&with_protocol(config.clone(), p));
@@ -165,12 +163,10 @@ pub fn run_scene(
         }
         let detections = [
             detector
-                .detect_near(&images[0], guards[0].hint(step.frames[0].t_s))?
-                .filter(|d| guards[0].accept(step.frames[0].t_s, d))
+                .detect(0, step.frames[0].t_s, &images[0])?
                 .map(|d| d.centre),
             detector
-                .detect_near(&images[1], guards[1].hint(step.frames[1].t_s))?
-                .filter(|d| guards[1].accept(step.frames[1].t_s, d))
+                .detect(1, step.frames[1].t_s, &images[1])?
                 .map(|d| d.centre),
         ];
         let t_s = step.frames[0].t_s;

@@ -5,7 +5,7 @@
 
 use acquisition::sim::{Presets, Simulator};
 use anyhow::Result;
-use detection::{ColourBlobConfig, ColourBlobDetector, PartialViewGuard};
+use detection::{ColourBlobConfig, TrackedDetector};
 use geolocation::EstimatorConfig;
 use matching::{ChainOutcome, FrameInput, MatchingConfig, VisionChain};
 use nalgebra::Point3;
@@ -52,9 +52,7 @@ pub fn run(every: u64, progress: &indicatif::ProgressBar) -> Result<VisionPass> 
     let (w, h) = (config.camera.width as i32, config.camera.height as i32);
     let mut sim = Simulator::new(config)?;
     progress.set_length(sim.frame_count() / every);
-    let detector_config = ColourBlobConfig::default();
-    let mut guards = [PartialViewGuard::new(detector_config.partial_view); 2];
-    let mut detector = ColourBlobDetector::new(detector_config)?;
+    let mut detector = TrackedDetector::new(ColourBlobConfig::default())?;
     let ns = [2usize, 4];
     let mut chains = ns
         .iter()
@@ -95,16 +93,14 @@ pub fn run(every: u64, progress: &indicatif::ProgressBar) -> Result<VisionPass> 
             .frames
             .iter()
             .zip(&images)
-            .zip(&mut guards)
-            .map(|((f, image), guard)| {
+            .map(|(f, image)| {
                 Ok(FrameInput {
                     seq: f.seq,
                     t_s: f.t_s,
                     pose: f.measured,
                     image,
                     detection: detector
-                        .detect_near(image, guard.hint(f.t_s))?
-                        .filter(|d| guard.accept(f.t_s, d))
+                        .detect(f.uav.index(), f.t_s, image)?
                         .map(|d| d.centre),
                     intrinsics: sim.intrinsics(),
                     distortion: sim.distortion(),

@@ -1,0 +1,101 @@
+//! The colour-blob detector with each camera's track: the one way a stream of frames
+//! is detected (the detection service, the evaluation's vision pass and scene suite).
+//! Per camera, [`PartialViewGuard`] gives the detector its hint and drops a partly
+//! hidden target; what was dropped or retried is counted.
+
+use crate::{ColourBlobConfig, ColourBlobDetector, DetectError, Detection, PartialViewGuard};
+use opencv::core as cv;
+
+/// What [`TrackedDetector`] did beyond detecting, since the last
+/// [`TrackedDetector::take_counts`].
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct TrackCounts {
+    /// Frames looked at again with the exposure-scaled brightness floor.
+    pub exposure_retries: u64,
+    /// Detections of a partly hidden target, dropped.
+    pub partial_view_dropped: u64,
+}
+
+pub struct TrackedDetector {
+    detector: ColourBlobDetector,
+    guards: [PartialViewGuard; 2],
+    counts: TrackCounts,
+    retries_seen: u64,
+}
+
+impl TrackedDetector {
+    pub fn new(config: ColourBlobConfig) -> Result<Self, DetectError> {
+        let guard = PartialViewGuard::new(config.partial_view);
+        Ok(Self {
+            detector: ColourBlobDetector::new(config)?,
+            guards: [guard; 2],
+            counts: TrackCounts::default(),
+            retries_seen: 0,
+        })
+    }
+
+    /// The target in `camera`'s (0 = left, 1 = right) frame taken at `t_s`, if it is
+    /// there whole.
+    pub fn detect(
+        &mut self,
+        camera: usize,
+        t_s: f64,
+        frame: &cv::Mat,
+    ) -> Result<Option<Detection>, DetectError> {
+        let guard = self
+            .guards
+            .get_mut(camera)
+            .ok_or_else(|| DetectError::Config(format!("camera {camera} is not 0 or 1")))?;
+        let found = self.detector.detect_near(frame, guard.hint(t_s));
+        let retries = self.detector.exposure_retries();
+        self.counts.exposure_retries += retries - self.retries_seen;
+        self.retries_seen = retries;
+        let Some(detection) = found? else {
+            return Ok(None);
+        };
+        if guard.accept(t_s, &detection) {
+            Ok(Some(detection))
+        } else {
+            self.counts.partial_view_dropped += 1;
+            Ok(None)
+        }
+    }
+
+    /// The counts since the last call, and starts again from zero.
+    pub fn take_counts(&mut self) -> TrackCounts {
+        std::mem::take(&mut self.counts)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn frame_with_red(x: i32, w: i32) -> cv::Mat {
+        let mut m = cv::Mat::new_rows_cols_with_default(
+            120,
+            160,
+            cv::CV_8UC3,
+            cv::Scalar::new(90.0, 110.0, 95.0, 0.0),
+        )
+        .unwrap();
+        let red = cv::Scalar::new(36.0, 28.0, 214.0, 0.0);
+        let rect = cv::Rect::new(x, 50, w, 9);
+        opencv::imgproc::rectangle(&mut m, rect, red, -1, opencv::imgproc::LINE_8, 0).unwrap();
+        m
+    }
+
+    #[test]
+    fn each_camera_keeps_its_own_track_and_a_partial_view_is_counted() {
+        let mut d = TrackedDetector::new(ColourBlobConfig::default()).unwrap();
+        assert!(d.detect(0, 0.0, &frame_with_red(40, 20)).unwrap().is_some());
+        // The right camera sees a short blob first: its own reference, accepted.
+        assert!(d.detect(1, 0.0, &frame_with_red(40, 8)).unwrap().is_some());
+        // The left camera's target half hidden: dropped and counted.
+        assert!(d.detect(0, 0.1, &frame_with_red(40, 8)).unwrap().is_none());
+        let counts = d.take_counts();
+        assert_eq!(counts.partial_view_dropped, 1);
+        assert_eq!(d.take_counts(), TrackCounts::default());
+        assert!(d.detect(2, 0.2, &frame_with_red(40, 20)).is_err());
+    }
+}
