@@ -15,12 +15,67 @@ pub struct ServiceArgs {
     /// The run's id: the iceoryx2 service prefix `dualgeo/<run-id>/`.
     #[arg(long)]
     pub run_id: String,
-    /// Where to write `<stage>.json` (histograms and counters) on exit.
+    /// Where to write `<stage>.<incarnation>.json` (histograms and counters): once a
+    /// second while running and on exit.
     #[arg(long)]
     pub stats_dir: PathBuf,
     /// The run's configuration (TOML with sections per stage); defaults if absent.
     #[arg(long)]
     pub config: Option<PathBuf>,
+    /// Where the service keeps its checkpoint (`crate::checkpoint`), so a restarted
+    /// service resumes; none: nothing is kept.
+    #[arg(long)]
+    pub state_dir: Option<PathBuf>,
+    /// 0 for the first start, n for the n-th restart by the supervisor.
+    #[arg(long, default_value_t = 0)]
+    pub incarnation: u32,
+}
+
+impl ServiceArgs {
+    /// `<state-dir>/<name>` when the run keeps state.
+    pub fn state_file(&self, name: &str) -> Option<PathBuf> {
+        self.state_dir.as_ref().map(|d| d.join(name))
+    }
+}
+
+/// How often a running service refreshes its statistics file.
+pub const STATS_SAVE_INTERVAL: std::time::Duration = std::time::Duration::from_secs(1);
+
+/// Saves a stage's statistics at most once per [`STATS_SAVE_INTERVAL`] while it runs,
+/// so a killed service leaves all but its last second (called after the outputs of a
+/// wake-up are published: the save never delays a frame's own result).
+pub struct StatsSaver {
+    dir: PathBuf,
+    incarnation: u32,
+    last: std::time::Instant,
+}
+
+impl StatsSaver {
+    pub fn new(args: &ServiceArgs) -> Self {
+        Self {
+            dir: args.stats_dir.clone(),
+            incarnation: args.incarnation,
+            last: std::time::Instant::now(),
+        }
+    }
+
+    /// Saves if the last save is older than the interval.
+    pub fn tick(&mut self, stats: &crate::stats::StageStats) {
+        if self.last.elapsed() >= STATS_SAVE_INTERVAL {
+            self.last = std::time::Instant::now();
+            if let Err(e) = stats.save(&self.dir, self.incarnation) {
+                tracing::warn!("statistics not saved: {e}");
+            }
+        }
+    }
+
+    /// The final save, when the service stops.
+    pub fn finish(
+        &self,
+        stats: &crate::stats::StageStats,
+    ) -> Result<PathBuf, crate::stats::StatsError> {
+        stats.save(&self.dir, self.incarnation)
+    }
 }
 
 #[derive(Debug, thiserror::Error)]

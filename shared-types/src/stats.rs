@@ -87,13 +87,19 @@ impl StageStats {
         }
     }
 
-    pub fn file_path(dir: &Path, stage: &str) -> PathBuf {
-        dir.join(format!("{stage}.json"))
+    /// `<dir>/<stage>.<incarnation>.json`: a restarted service (incarnation 1, 2, …)
+    /// writes its own file beside the one its killed predecessor left, and
+    /// [`StageStats::load_stage`] merges them.
+    pub fn file_path(dir: &Path, stage: &str, incarnation: u32) -> PathBuf {
+        dir.join(format!("{stage}.{incarnation}.json"))
     }
 
-    /// Writes `<dir>/<stage>.json` (through a temporary file, so a reader never sees half).
-    pub fn save(&self, dir: &Path) -> Result<PathBuf, StatsError> {
-        let path = Self::file_path(dir, &self.stage);
+    /// Writes `<dir>/<stage>.<incarnation>.json` (through a temporary file, so a reader
+    /// never sees half). Services call it once a second while they run
+    /// ([`crate::shell::StatsSaver`]) and once when they stop, so a killed service loses
+    /// at most its last second.
+    pub fn save(&self, dir: &Path, incarnation: u32) -> Result<PathBuf, StatsError> {
+        let path = Self::file_path(dir, &self.stage, incarnation);
         let mut histograms = BTreeMap::new();
         for (name, h) in &self.histograms {
             let mut bytes = Vec::new();
@@ -125,6 +131,33 @@ impl StageStats {
         std::fs::write(&tmp, text).map_err(io)?;
         std::fs::rename(&tmp, &path).map_err(io)?;
         Ok(path)
+    }
+
+    /// Every incarnation's file of `stage` in `dir`, merged; `None` when there is none.
+    pub fn load_stage(dir: &Path, stage: &str) -> Result<Option<Self>, StatsError> {
+        let entries = std::fs::read_dir(dir).map_err(|source| StatsError::Io {
+            path: dir.to_path_buf(),
+            source,
+        })?;
+        let prefix = format!("{stage}.");
+        let mut merged: Option<Self> = None;
+        let mut paths: Vec<PathBuf> = entries
+            .flatten()
+            .map(|e| e.path())
+            .filter(|p| {
+                p.file_name().and_then(|n| n.to_str()).is_some_and(|n| {
+                    n.strip_prefix(&prefix)
+                        .and_then(|rest| rest.strip_suffix(".json"))
+                        .is_some_and(|n| !n.is_empty() && n.bytes().all(|b| b.is_ascii_digit()))
+                })
+            })
+            .collect();
+        paths.sort();
+        for path in paths {
+            let s = Self::load(&path)?;
+            merged.get_or_insert_with(|| Self::new(stage)).merge(&s);
+        }
+        Ok(merged)
     }
 
     pub fn load(path: &Path) -> Result<Self, StatsError> {
@@ -238,7 +271,7 @@ mod tests {
             a.record("compute", us);
         }
         a.count("frames", 1000);
-        let path = a.save(&dir).unwrap();
+        let path = a.save(&dir, 0).unwrap();
         let b = StageStats::load(&path).unwrap();
         assert_eq!(b.counter("frames"), 1000);
         let p = Percentiles::of(&b.histograms["compute"]);
@@ -250,6 +283,12 @@ mod tests {
         merged.merge(&b);
         assert_eq!(merged.histograms["compute"].len(), 2000);
         assert_eq!(merged.counter("frames"), 2000);
+        // A restarted incarnation's file is merged with its predecessor's.
+        a.save(&dir, 1).unwrap();
+        std::fs::write(dir.join("detection.1.json.tmp"), "half").unwrap();
+        let both = StageStats::load_stage(&dir, "detection").unwrap().unwrap();
+        assert_eq!(both.counter("frames"), 2000);
+        assert!(StageStats::load_stage(&dir, "matching").unwrap().is_none());
         std::fs::remove_dir_all(&dir).unwrap();
     }
 

@@ -127,6 +127,11 @@ impl Endpoint {
                 .create::<Ipc>(),
             format!("create node {process}")
         )?;
+        // iceoryx2 installs its SIGINT/SIGTERM handler lazily, at the first wait. A
+        // process killed by SIGTERM before that would die instead of stopping cleanly
+        // (seen: a restarted acquisition rendering behind its clock never waited), so
+        // install it now. A request that already arrived is seen at the next wait.
+        let _ = node.wait(std::time::Duration::ZERO);
         Ok(Self {
             node,
             run_id: run_id.to_string(),

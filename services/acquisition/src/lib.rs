@@ -5,4 +5,5 @@
 //! binary lands with issue #5.
 
 pub mod recording;
+pub mod resume;
 pub mod sim;

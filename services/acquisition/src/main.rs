@@ -14,13 +14,21 @@
 //! which acknowledges every pair it finishes (or drops) on the `wake/acquisition` event
 //! service. A missing acknowledgement is given up after 1 s (`flow_timeouts`).
 //!
+//! Restart (issue #13): with `--state-dir`, the stream position is checkpointed before
+//! each pair is sent ([`acquisition::resume`]). A restarted acquisition (incarnation > 0)
+//! skips to it: the recording's next pair, or the simulator stepped (not rendered) to
+//! it; the clock is re-anchored so the resumed pair is due at once, and the simulator's
+//! stream log is appended to.
+//!
 //! Histograms (µs): `produce` (render or decode of a pair), `pacing_lag` (how late a
-//! pair left against its schedule). Counters: `pairs_in`, `frames_in`, `pairs_dropped`,
-//! `bad_frames`, `loops`, `flow_timeouts`.
+//! pair left against its schedule), `resume` (skipping to the checkpointed position).
+//! Counters: `pairs_in`, `frames_in`, `pairs_dropped`, `bad_frames`, `loops`,
+//! `flow_timeouts`, `resumed`, `checkpoint_refused`, `checkpoint_failed`.
 
 use acquisition::recording::{
     decode_image_into, Recording, StereoPair, StreamLog, TelemetryRow, TruthRow,
 };
+use acquisition::resume::StreamPosition;
 use acquisition::sim::{ScenarioArgs, SimConfig, Simulator};
 use anyhow::{bail, Context, Result};
 use clap::Parser;
@@ -28,7 +36,7 @@ use iceoryx2::prelude::EventId;
 use shared_types::clock::{elapsed_us, monotonic_ns};
 use shared_types::conventions::{Intrinsics, Uav};
 use shared_types::messages::{FrameHeader, PixelFormat, PoseSample};
-use shared_types::shell::{init_tracing, ServiceArgs};
+use shared_types::shell::{init_tracing, ServiceArgs, StatsSaver};
 use shared_types::stats::StageStats;
 use shared_types::transport::{Endpoint, FramePublisher, Stage, END_OF_STREAM_EVENT};
 use std::path::PathBuf;
@@ -162,6 +170,23 @@ impl Source {
         }
     }
 
+    /// Skips the first `n` pairs (a restart resuming its predecessor's position): the
+    /// simulator steps without rendering, a recording moves its index.
+    fn skip(&mut self, n: u64) {
+        match self {
+            Source::Sim { sim, .. } => {
+                for _ in 0..n {
+                    if sim.step().is_none() {
+                        break;
+                    }
+                }
+            }
+            Source::Recording { pairs, next, .. } => {
+                *next = usize::try_from(n).unwrap_or(usize::MAX).min(pairs.len());
+            }
+        }
+    }
+
     /// Starts again from the first pair.
     fn rewind(&mut self) -> Result<()> {
         match self {
@@ -251,7 +276,33 @@ fn main() -> Result<()> {
         _ => None,
     };
     let mut acknowledged = 0u64;
+    let mut stats = StageStats::new("acquisition");
+    let state_path = args.service.state_file("acquisition.ckpt");
+    let resumed = match (&state_path, args.service.incarnation) {
+        (Some(path), n) if n > 0 => match StreamPosition::load(path) {
+            Ok(p) => p,
+            Err(e) => {
+                stats.count("checkpoint_refused", 1);
+                tracing::warn!("stream position ignored, starting from the first pair: {e}");
+                None
+            }
+        },
+        _ => None,
+    };
+    let mut position = resumed.unwrap_or_default();
+    if let Some(p) = resumed {
+        let t0 = monotonic_ns();
+        source.skip(p.consumed);
+        stats.record("resume", elapsed_us(t0, monotonic_ns()));
+        stats.count("resumed", 1);
+        tracing::info!(
+            next_pair = p.next_seq,
+            loops = p.loops,
+            "resuming the stream"
+        );
+    }
     let mut log = match (&source, &args.log_dir) {
+        (Source::Sim { .. }, Some(dir)) if resumed.is_some() => Some(StreamLog::reopen(dir)?),
         (Source::Sim { .. }, Some(dir)) => Some(StreamLog::create(dir)?),
         _ => None,
     };
@@ -260,11 +311,19 @@ fn main() -> Result<()> {
         [k.fx, k.fy, k.cx, k.cy]
     });
     let distortion = [Uav::Left, Uav::Right].map(|u| source.distortion(u));
-    let mut stats = StageStats::new("acquisition");
+    let mut saver = StatsSaver::new(&args.service);
     tracing::info!(run = endpoint.run_id(), source = %args.source, width, height, ?rate, "acquisition streaming");
 
-    let start_ns = monotonic_ns();
-    let (mut seq, mut t_offset, mut t_first, mut last_t) = (0u64, 0.0f64, None::<f64>, 0.0f64);
+    let mut start_ns = monotonic_ns();
+    // A resumed stream's clock is re-anchored at its first pair.
+    let mut reanchor = resumed.is_some();
+    let StreamPosition {
+        next_seq: mut seq,
+        mut t_offset,
+        mut t_first,
+        mut last_t,
+        ..
+    } = position;
     let mut signalled = false;
     'stream: loop {
         if let Some(listener) = &acks {
@@ -311,18 +370,22 @@ fn main() -> Result<()> {
                     source.rewind()?;
                     t_offset += last_t + source.period_s() - t_first.unwrap_or(0.0);
                     t_first = None;
+                    position.consumed = 0;
+                    position.loops += 1;
                     stats.count("loops", 1);
                     continue;
                 }
                 break 'stream;
             }
             Some(Err(e)) => {
+                position.consumed += 1;
                 tracing::warn!("pair skipped: {e:#}");
                 stats.count("bad_frames", 1);
                 continue;
             }
             Some(Ok(info)) => info,
         };
+        position.consumed += 1;
         let captured = monotonic_ns();
         stats.record("produce", elapsed_us(produce_start, captured));
         let t_first_pair = *t_first.get_or_insert(info.t_s);
@@ -334,6 +397,10 @@ fn main() -> Result<()> {
             Rate::Hz(hz) => Some(seq as f64 / hz),
             Rate::Max => None,
         };
+        if let (Some(due), true) = (due_s, reanchor) {
+            start_ns = monotonic_ns().saturating_sub((due * 1e9) as u64);
+        }
+        reanchor = false;
         if let Some(due) = due_s {
             let due_ns = start_ns + (due * 1e9) as u64;
             let now = monotonic_ns();
@@ -364,6 +431,20 @@ fn main() -> Result<()> {
                 ..Default::default()
             };
         }
+        // The position after this pair, saved before it is sent (never sent twice).
+        position = StreamPosition {
+            next_seq: seq + 1,
+            t_offset,
+            t_first,
+            last_t,
+            ..position
+        };
+        if let Some(path) = &state_path {
+            if let Err(e) = position.save(path) {
+                stats.count("checkpoint_failed", 1);
+                tracing::warn!("stream position not saved: {e}");
+            }
+        }
         if let (Some(log), Some(truth)) = (log.as_mut(), &info.truth) {
             for (uav, t) in truth.iter().enumerate() {
                 let telemetry = TelemetryRow {
@@ -380,6 +461,7 @@ fn main() -> Result<()> {
                 };
                 log.append(&telemetry, &truth)?;
             }
+            log.flush()?;
         }
         for mut sample in [left, right] {
             sample.user_header_mut().published_ns = monotonic_ns();
@@ -391,7 +473,10 @@ fn main() -> Result<()> {
         stats.count("pairs_in", 1);
         stats.count("frames_in", 2);
         seq += 1;
-        if rate_is_max_and_signalled(&endpoint, rate) {
+        saver.tick(&stats);
+        // Paced pairs usually wait (and see a stop request there), but a source slower
+        // than its clock never does: look once per pair.
+        if endpoint.node.wait(Duration::ZERO).is_err() {
             signalled = true;
             break 'stream;
         }
@@ -407,12 +492,7 @@ fn main() -> Result<()> {
         // Stay until the supervisor stops us: what was sent stays readable.
         while endpoint.node.wait(Duration::from_millis(200)).is_ok() {}
     }
-    let path = stats.save(&args.service.stats_dir)?;
+    let path = saver.finish(&stats)?;
     tracing::info!(stats = %path.display(), "acquisition stopped");
     Ok(())
-}
-
-/// In `--rate max` nothing else waits, so look for a stop request once per pair.
-fn rate_is_max_and_signalled(endpoint: &Endpoint, rate: Rate) -> bool {
-    matches!(rate, Rate::Max) && endpoint.node.wait(Duration::ZERO).is_err()
 }

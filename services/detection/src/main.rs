@@ -17,7 +17,7 @@ use shared_types::clock::{elapsed_us, monotonic_ns};
 use shared_types::conventions::Uav;
 use shared_types::messages::DetectionMsg;
 use shared_types::service_names::Topic;
-use shared_types::shell::{init_tracing, load_section, serve, SeqGaps, ServiceArgs};
+use shared_types::shell::{init_tracing, load_section, serve, SeqGaps, ServiceArgs, StatsSaver};
 use shared_types::stats::StageStats;
 use shared_types::transport::{Endpoint, Stage};
 
@@ -43,7 +43,12 @@ fn main() -> Result<()> {
     let listener = endpoint.listener(Stage::Detection)?;
     let mut stats = StageStats::new("detection");
     let mut gaps = [SeqGaps::default(); 2];
-    tracing::info!(run = endpoint.run_id(), "detection ready");
+    let mut saver = StatsSaver::new(&args.service);
+    tracing::info!(
+        run = endpoint.run_id(),
+        incarnation = args.service.incarnation,
+        "detection ready"
+    );
 
     let stop = serve(&listener, |wake| -> Result<bool> {
         let mut first = true;
@@ -100,9 +105,10 @@ fn main() -> Result<()> {
                 wake_matching.notify().context("wake matching")?;
             }
         }
+        saver.tick(&stats);
         Ok(true)
     })?;
-    let path = stats.save(&args.service.stats_dir)?;
+    let path = saver.finish(&stats)?;
     tracing::info!(?stop, stats = %path.display(), "detection stopped");
     Ok(())
 }

@@ -30,6 +30,7 @@ pub mod one_shot;
 pub mod regression;
 pub mod synthetic;
 pub mod temporal;
+pub mod temporal_snapshot;
 
 pub use config::{EstimatorConfig, EstimatorMethod, NoiseModel};
 pub use configured::{estimate_set, SetEstimate};
@@ -42,3 +43,4 @@ pub use iteration::{geolocate, Estimate};
 pub use observation::Observation;
 pub use one_shot::one_shot;
 pub use temporal::{ImageId, TemporalEstimate, TemporalEstimator};
+pub use temporal_snapshot::TemporalSnapshot;

@@ -126,21 +126,21 @@ impl TemporalConfig {
 /// The filter. Feed it every geolocation's observation set in time order.
 #[derive(Debug, Clone)]
 pub struct TemporalEstimator {
-    config: EstimatorConfig,
-    /// (time, state, covariance): 7 core states then 6 per keyframe slot.
-    state: Option<(f64, DVector<f64>, DMatrix<f64>)>,
-    slots: Vec<ImageId>,
+    pub(crate) config: EstimatorConfig,
+    /// (time, state, covariance): 7 core states then 8 per keyframe slot.
+    pub(crate) state: Option<(f64, DVector<f64>, DMatrix<f64>)>,
+    pub(crate) slots: Vec<ImageId>,
     /// Running mean of each UAV's whitened current-ray innovation (zero-mean when the
     /// filter's model holds).
-    drift: [nalgebra::Vector2<f64>; 2],
+    pub(crate) drift: [nalgebra::Vector2<f64>; 2],
     /// Geolocations since the last re-opening.
-    since_reopen: usize,
+    pub(crate) since_reopen: usize,
 }
 
-const CORE: usize = 7;
+pub(crate) const CORE: usize = 7;
 /// States per keyframe: pose error (x, y, z, yaw, pitch, roll) and the offset (u, v)
 /// its epipolar transfer shares across reuses.
-const SLOT: usize = 8;
+pub(crate) const SLOT: usize = 8;
 
 fn theta(s: &DVector<f64>) -> Theta {
     Theta::new(s[0], s[1], s[2], s[5], s[6])

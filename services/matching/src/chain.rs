@@ -219,10 +219,10 @@ pub struct VisionChain {
     config: MatchingConfig,
     estimator: EstimatorConfig,
     orb: OrbExtractor,
-    rings: [KeyframeRing; 2],
+    pub(crate) rings: [KeyframeRing; 2],
     /// Each UAV's measured position smoothed over time, (t, position): the baseline
     /// constraint's ruler.
-    smoothed: [Option<(f64, nalgebra::Point3<f64>)>; 2],
+    pub(crate) smoothed: [Option<(f64, nalgebra::Point3<f64>)>; 2],
     /// Guided-matching priors: the last ground homography from each current side to
     /// each keyframe.
     priors: HashMap<PriorKey, Prior>,
@@ -354,11 +354,13 @@ impl VisionChain {
     }
 
     /// Offers the current pair to the keyframe rings (the baseline constraint decides).
-    pub fn admit(&mut self, frames: [&FrameMeta; 2], features: &[Arc<Features>; 2]) {
+    /// Returns, per UAV, whether the frame was admitted.
+    pub fn admit(&mut self, frames: [&FrameMeta; 2], features: &[Arc<Features>; 2]) -> [bool; 2] {
+        let mut admitted = [false; 2];
         for uav in [Uav::Left, Uav::Right] {
             let frame = frames[uav.index()];
             let baseline_position = self.baseline_position(uav, frame);
-            self.rings[uav.index()].offer(Keyframe {
+            admitted[uav.index()] = self.rings[uav.index()].offer(Keyframe {
                 seq: frame.seq,
                 t_s: frame.t_s,
                 pose: frame.pose,
@@ -370,6 +372,7 @@ impl VisionChain {
                 features: features[uav.index()].clone(),
             });
         }
+        admitted
     }
 
     /// Section 2.3 for the current pair: the corresponding point of the current target

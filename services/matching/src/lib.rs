@@ -15,6 +15,8 @@ pub mod grid;
 pub mod ground_plane;
 pub mod hamming;
 pub mod ring;
+pub mod ring_snapshot;
+pub mod ring_store;
 
 pub use chain::{
     estimate_matched, extract_undistorted, ChainCounts, ChainOutcome, ChainResult, ChainTiming,

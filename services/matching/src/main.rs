@@ -8,19 +8,28 @@
 //!   [`ObservationSetMsg`] to geolocation, then the pair is offered to the rings.
 //!
 //! A slow matching stage keeps only the newest pair: older queued frames are dropped
-//! and counted (`frames_dropped`). Histograms (µs): `transport`, `wait`, `orb`, `match`,
-//! `compute` (orb + match of one pair). Counters: `frames`, `pairs`, `sets`,
+//! and counted (`frames_dropped`).
+//!
+//! Restart (issue #13): with `--state-dir`, every admitted keyframe and the rings' index
+//! are checkpointed ([`matching::ring_store`]) after the pair's set is published; a
+//! restarted service refills its rings from them (`keyframes_restored`) and can match
+//! the first complete pair it sees.
+//!
+//! Histograms (µs): `transport`, `wait`, `orb`, `match`, `compute` (orb + match of one
+//! pair), `checkpoint` (keyframe files and index). Counters: `frames`, `pairs`, `sets`,
 //! `frames_lost` (sequence gaps), `frames_dropped`, `no_detection`, `warming_up`,
 //! `past_rejected.<reason>`, `essential_fallback` (past images whose F came from the
 //! 5-point E because the dominant plane was not level), and the adaptations of
 //! [`matching::ChainCounts`]: `retried_looser_ratio`, `retry_rescued`,
-//! `fast_threshold_lowered`, `keypoints_outside_lens`, `detections_outside_lens`.
+//! `fast_threshold_lowered`, `keypoints_outside_lens`, `detections_outside_lens`;
+//! `keyframes_restored`, `checkpoint_refused`, `checkpoint_failed`.
 
 use anyhow::{Context, Result};
 use clap::Parser;
 use detection::frame_view::frame_mat;
 use geolocation::EstimatorConfig;
 use matching::features::{Features, OrbExtractor};
+use matching::ring_store::RingStore;
 use matching::{
     extract_undistorted, ChainCounts, FrameInput, FrameMeta, MatchOutcome, MatchingConfig,
     VisionChain,
@@ -30,7 +39,9 @@ use shared_types::conventions::{Intrinsics, Uav};
 use shared_types::lens::Distortion;
 use shared_types::messages::{DetectionMsg, FrameHeader, ObservationSetMsg, MAX_OBSERVATIONS};
 use shared_types::service_names::Topic;
-use shared_types::shell::{init_tracing, load_section, serve, SeqGaps, ServiceArgs, Wake};
+use shared_types::shell::{
+    init_tracing, load_section, serve, SeqGaps, ServiceArgs, StatsSaver, Wake,
+};
 use shared_types::stats::StageStats;
 use shared_types::transport::{Endpoint, FrameSubscriber, Stage};
 use std::collections::BTreeMap;
@@ -62,6 +73,9 @@ struct Matcher {
     pending: BTreeMap<u64, Pending>,
     stats: StageStats,
     gaps: [SeqGaps; 2],
+    /// Where the rings are checkpointed, and what was admitted since the last save.
+    store: Option<RingStore>,
+    unsaved: [bool; 2],
 }
 
 /// Features of the left frame from the second ORB thread, with its counts.
@@ -294,11 +308,33 @@ impl Matcher {
                 Some(msg)
             }
         };
-        self.chain.admit([&ml, &mr], &features);
+        let admitted = self.chain.admit([&ml, &mr], &features);
+        self.unsaved = [self.unsaved[0] | admitted[0], self.unsaved[1] | admitted[1]];
         let match_us = elapsed_us(start, monotonic_ns());
         self.stats.record("match", match_us);
         self.stats.record("compute", pair.orb_us / 2 + match_us);
         Ok(set)
+    }
+
+    /// Saves newly admitted keyframes (called after the sets are published).
+    fn checkpoint(&mut self) {
+        let Some(store) = self.store.as_mut() else {
+            return;
+        };
+        let unsaved = std::mem::take(&mut self.unsaved);
+        if !unsaved.iter().any(|u| *u) {
+            return;
+        }
+        let start = monotonic_ns();
+        match store.save(&self.chain, unsaved) {
+            Ok(()) => self
+                .stats
+                .record("checkpoint", elapsed_us(start, monotonic_ns())),
+            Err(e) => {
+                self.stats.count("checkpoint_failed", 1);
+                tracing::warn!("keyframes not checkpointed: {e}");
+            }
+        }
     }
 }
 
@@ -317,12 +353,37 @@ fn main() -> Result<()> {
     let worker_orb = OrbExtractor::new(&config)?;
     let mut matcher = Matcher {
         acks: 0,
-        chain: VisionChain::new(config, estimator)?,
+        chain: VisionChain::new(config.clone(), estimator)?,
         worker_orb,
         pending: BTreeMap::new(),
         stats: StageStats::new("matching"),
         gaps: [SeqGaps::default(); 2],
+        store: None,
+        unsaved: [false; 2],
     };
+    if let Some(dir) = &args.service.state_dir {
+        let mut store = RingStore::open(dir)?;
+        let start = monotonic_ns();
+        match store.restore(&mut matcher.chain) {
+            Ok(n) => {
+                matcher.stats.count("keyframes_restored", n as u64);
+                if n > 0 {
+                    tracing::info!(
+                        keyframes = n,
+                        ms = elapsed_us(start, monotonic_ns()) as f64 / 1e3,
+                        "keyframe rings restored"
+                    );
+                }
+            }
+            Err(e) => {
+                matcher.stats.count("checkpoint_refused", 1);
+                tracing::warn!("keyframe rings not restored, rebuilding them: {e}");
+                matcher.chain = VisionChain::new(config.clone(), estimator)?;
+            }
+        }
+        matcher.store = Some(store);
+    }
+    let mut saver = StatsSaver::new(&args.service);
     let endpoint = Endpoint::new(&args.service.run_id, "matching")?;
     let frames = [
         endpoint.frame_subscriber(Uav::Left)?,
@@ -350,9 +411,11 @@ fn main() -> Result<()> {
         for _ in 0..std::mem::take(&mut matcher.acks) {
             ack_acquisition.notify().context("acknowledge a pair")?;
         }
+        matcher.checkpoint();
+        saver.tick(&matcher.stats);
         Ok(true)
     })?;
-    let path = matcher.stats.save(&args.service.stats_dir)?;
+    let path = saver.finish(&matcher.stats)?;
     tracing::info!(?stop, stats = %path.display(), "matching stopped");
     Ok(())
 }

@@ -93,6 +93,20 @@ impl KeyframeRing {
     pub fn iter(&self) -> impl Iterator<Item = &Keyframe> {
         self.frames.iter()
     }
+
+    /// The newest keyframe (the one an admitting `offer` just added).
+    pub fn newest(&self) -> Option<&Keyframe> {
+        self.frames.back()
+    }
+
+    /// Puts back a keyframe of a checkpointed ring (oldest first), without the baseline
+    /// check: the ring that saved it had already admitted it.
+    pub fn push_restored(&mut self, frame: Keyframe) {
+        if self.frames.len() == self.capacity {
+            self.frames.pop_front();
+        }
+        self.frames.push_back(frame);
+    }
 }
 
 #[cfg(test)]

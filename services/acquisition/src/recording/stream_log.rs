@@ -40,6 +40,38 @@ impl StreamLog {
         })
     }
 
+    /// Opens the two files of `dir` to add rows after what a previous (killed)
+    /// acquisition wrote; creates them with their headers when they are not there.
+    pub fn reopen(dir: &Path) -> Result<Self, RecordingError> {
+        if !dir.join(TELEMETRY_FILE).is_file() || !dir.join(TRUTH_FILE).is_file() {
+            return Self::create(dir);
+        }
+        let open = |name: &str| -> Result<csv::Writer<File>, RecordingError> {
+            let path = dir.join(name);
+            let file = std::fs::OpenOptions::new()
+                .append(true)
+                .open(&path)
+                .map_err(|e| RecordingError::io(&path, e))?;
+            Ok(csv::Writer::from_writer(file))
+        };
+        Ok(Self {
+            dir: dir.to_path_buf(),
+            telemetry: open(TELEMETRY_FILE)?,
+            truth: open(TRUTH_FILE)?,
+        })
+    }
+
+    /// Writes what is buffered (after every pair: a killed acquisition loses no row of
+    /// a pair it sent).
+    pub fn flush(&mut self) -> Result<(), RecordingError> {
+        self.telemetry
+            .flush()
+            .map_err(|e| err(&self.dir.join(TELEMETRY_FILE), e))?;
+        self.truth
+            .flush()
+            .map_err(|e| err(&self.dir.join(TRUTH_FILE), e))
+    }
+
     pub fn append(
         &mut self,
         telemetry: &TelemetryRow,
@@ -55,11 +87,6 @@ impl StreamLog {
 
     /// Flushes both files.
     pub fn finish(mut self) -> Result<(), RecordingError> {
-        self.telemetry
-            .flush()
-            .map_err(|e| err(&self.dir.join(TELEMETRY_FILE), e))?;
-        self.truth
-            .flush()
-            .map_err(|e| err(&self.dir.join(TRUTH_FILE), e))
+        self.flush()
     }
 }

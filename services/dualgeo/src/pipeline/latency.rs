@@ -24,6 +24,18 @@ pub const ROWS: [&str; 5] = [
     "end_to_end",
 ];
 
+/// Frames that entered the pipeline (or were due to) and never reached a geolocation
+/// attempt: pairs acquisition could not loan (×2), frames overwritten before detection
+/// or matching read them, frames matching skipped to stay current, and observation sets
+/// geolocation missed (×2). `counter(stage, name)` reads the counters.
+pub fn frames_dropped_of(counter: impl Fn(&str, &str) -> u64) -> u64 {
+    2 * counter("acquisition", "pairs_dropped")
+        + counter("detection", "frames_lost")
+        + counter("matching", "frames_lost")
+        + counter("matching", "frames_dropped")
+        + 2 * counter("geolocation", "sets_lost")
+}
+
 /// The stages' stats files plus the supervisor's own.
 pub struct Gathered {
     pub stages: BTreeMap<String, StageStats>,
@@ -33,9 +45,14 @@ impl Gathered {
     pub fn load(stats_dir: &Path, supervisor: &StageStats) -> Result<Self> {
         let mut stages = BTreeMap::new();
         for name in super::children::SERVICES {
-            let path = StageStats::file_path(stats_dir, name);
-            let s = StageStats::load(&path)
-                .with_context(|| format!("the {name} service left no statistics"))?;
+            let s = StageStats::load_stage(stats_dir, name)
+                .with_context(|| format!("the {name} service's statistics"))?
+                .with_context(|| {
+                    format!(
+                        "the {name} service left no statistics in {}",
+                        stats_dir.display()
+                    )
+                })?;
             stages.insert(name.to_string(), s);
         }
         stages.insert("supervisor".into(), supervisor.clone());
