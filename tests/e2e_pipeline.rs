@@ -88,9 +88,15 @@ fn pipeline_on_a_recording_and_a_corrupt_image() {
             "frames_in",
             "latency_us",
             "pairs_in",
+            "pairs_lost_in_restarts",
+            "recovery_ms",
+            "restarts",
             "throughput_hz"
         ]
     );
+    assert_eq!(report["pairs_lost_in_restarts"], 0, "{report}");
+    assert!(report["recovery_ms"].is_null(), "{report}");
+    assert_eq!(report["restarts"]["matching"], 0, "{report}");
     assert_eq!(report["frames_in"], 360, "{report}");
     assert_eq!(report["pairs_in"], 180, "{report}");
     assert_eq!(report["frames_dropped"], 0, "{report}");
@@ -260,13 +266,20 @@ fn child_named(pid: u32, name: &str) -> Option<u32> {
     None
 }
 
-/// A service that dies mid-run ends the run with its name and a non-zero exit, and
-/// the other services are stopped (no process left behind).
+/// With `--restart never`, a service that dies mid-run ends the run with its name and
+/// a non-zero exit, and the other services are stopped (no process left behind).
 #[test]
 fn a_dying_service_ends_the_run_clearly() {
     let dir = Scratch::new("dying");
     let run = Command::new(env!("CARGO_BIN_EXE_dualgeo"))
-        .args(["run", "--loop", "--out", &dir.s("out")])
+        .args([
+            "run",
+            "--loop",
+            "--restart",
+            "never",
+            "--out",
+            &dir.s("out"),
+        ])
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())
         .spawn()
@@ -295,6 +308,52 @@ fn a_dying_service_ends_the_run_clearly() {
         "{stderr}"
     );
     for name in ["dualgeo-acquis", "dualgeo-detecti", "dualgeo-geoloca"] {
+        assert!(child_named(pid, name).is_none(), "{name} left running");
+    }
+}
+
+/// Under the default policy a dead service is restarted, but one that dies more often
+/// than `--max-restarts` within the window ends the run, naming it.
+#[test]
+fn a_service_that_keeps_dying_ends_the_run_after_max_restarts() {
+    let dir = Scratch::new("crash-loop");
+    let run = Command::new(env!("CARGO_BIN_EXE_dualgeo"))
+        .args([
+            "run",
+            "--loop",
+            "--max-restarts",
+            "1",
+            "--out",
+            &dir.s("out"),
+        ])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("spawn dualgeo");
+    let pid = run.id();
+    let deadline = Instant::now() + Duration::from_secs(60);
+    let mut killed = Vec::new();
+    while killed.len() < 2 {
+        assert!(Instant::now() < deadline, "detection was not (re)started");
+        if child_named(pid, "dualgeo-acquis").is_some() {
+            if let Some(d) = child_named(pid, "dualgeo-detecti").filter(|d| !killed.contains(d)) {
+                std::thread::sleep(Duration::from_millis(500));
+                // SAFETY: kill(2) on a pid read from /proc just now.
+                unsafe { libc::kill(d as i32, libc::SIGKILL) };
+                killed.push(d);
+            }
+        }
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    let o = run.wait_with_output().expect("wait for dualgeo");
+    let stderr = text(&o.stderr);
+    assert!(!o.status.success(), "{stderr}");
+    assert!(stderr.contains("restarting it"), "{stderr}");
+    assert!(
+        stderr.contains("detection service died 2 times within 60 s"),
+        "{stderr}"
+    );
+    for name in ["dualgeo-acquis", "dualgeo-matchin", "dualgeo-geoloca"] {
         assert!(child_named(pid, name).is_none(), "{name} left running");
     }
 }

@@ -35,6 +35,15 @@ pub struct Service {
     pub name: &'static str,
     child: Child,
     exited: Option<ExitStatus>,
+    /// Arguments of the first start (a restart adds `--incarnation n`).
+    args: Vec<String>,
+    /// 0 for the first process, n after the n-th restart.
+    pub incarnation: u32,
+    /// When this incarnation was started.
+    pub started: Instant,
+    /// Its death was seen and handled by the restart policy (`restart.rs`): it is no
+    /// longer a failure to report when the run stops.
+    pub accounted: bool,
 }
 
 pub fn describe(status: ExitStatus) -> String {
@@ -45,32 +54,55 @@ pub fn describe(status: ExitStatus) -> String {
     }
 }
 
+fn start(name: &'static str, args: &[String]) -> Result<Child> {
+    let binary = service_binary(name)?;
+    let mut cmd = Command::new(&binary);
+    cmd.args(args);
+    // Own process group; die with the supervisor.
+    // SAFETY: only async-signal-safe calls (setpgid, prctl) between fork and exec.
+    unsafe {
+        cmd.pre_exec(|| {
+            if libc::setpgid(0, 0) != 0 {
+                return Err(std::io::Error::last_os_error());
+            }
+            if libc::prctl(libc::PR_SET_PDEATHSIG, libc::SIGTERM) != 0 {
+                return Err(std::io::Error::last_os_error());
+            }
+            Ok(())
+        });
+    }
+    cmd.spawn()
+        .with_context(|| format!("start the {name} service ({})", binary.display()))
+}
+
 impl Service {
     pub fn spawn(name: &'static str, args: &[String]) -> Result<Self> {
-        let binary = service_binary(name)?;
-        let mut cmd = Command::new(&binary);
-        cmd.args(args);
-        // Own process group; die with the supervisor.
-        // SAFETY: only async-signal-safe calls (setpgid, prctl) between fork and exec.
-        unsafe {
-            cmd.pre_exec(|| {
-                if libc::setpgid(0, 0) != 0 {
-                    return Err(std::io::Error::last_os_error());
-                }
-                if libc::prctl(libc::PR_SET_PDEATHSIG, libc::SIGTERM) != 0 {
-                    return Err(std::io::Error::last_os_error());
-                }
-                Ok(())
-            });
-        }
-        let child = cmd
-            .spawn()
-            .with_context(|| format!("start the {name} service ({})", binary.display()))?;
         Ok(Self {
             name,
-            child,
+            child: start(name, args)?,
             exited: None,
+            args: args.to_vec(),
+            incarnation: 0,
+            started: Instant::now(),
+            accounted: false,
         })
+    }
+
+    /// Starts the next incarnation of a service that has exited (and been reaped).
+    pub fn respawn(&mut self) -> Result<()> {
+        let incarnation = self.incarnation + 1;
+        let mut args = self.args.clone();
+        args.extend(["--incarnation".into(), incarnation.to_string()]);
+        self.child = start(self.name, &args)?;
+        self.exited = None;
+        self.incarnation = incarnation;
+        self.started = Instant::now();
+        self.accounted = false;
+        Ok(())
+    }
+
+    pub fn pid(&self) -> u32 {
+        self.child.id()
     }
 
     /// Reaps the child if it has exited (non-blocking).
@@ -113,11 +145,14 @@ impl Service {
     }
 }
 
-/// Stops every service (last started first) and reports the ones that did not exit 0.
+/// Stops every service (last started first) and reports the ones that did not exit 0
+/// (a service already dead and handled by the restart policy is not reported again).
 pub fn stop_all(services: &mut [Service], grace: Duration) -> Vec<String> {
     let mut failures = Vec::new();
     for s in services.iter_mut().rev() {
+        let accounted = s.accounted;
         match s.stop(grace) {
+            Ok(_) if accounted => {}
             Ok(status) if status.success() => {}
             Ok(status) => failures.push(format!("{} ended with {}", s.name, describe(status))),
             Err(e) => failures.push(format!("{}: {e:#}", s.name)),

@@ -1,7 +1,16 @@
 //! The supervisor's own iceoryx2 side: waiting until the services are connected, then
-//! collecting estimates until the stream ends or a signal arrives.
+//! collecting estimates until the stream ends, `--run-for-s` passes or a signal
+//! arrives, while the restart policy (`restart.rs`) watches the services every 25 ms.
+//!
+//! The last guard before the outputs: an estimate that is not newer than the one
+//! before it (`out_of_order`) or a valid one with a non-finite value (`non_finite`) is
+//! dropped and counted. The services already guarantee both; the chaos test checks
+//! that these counters stay 0.
 
 use super::children::{describe, Service};
+use super::restart::Supervision;
+use super::soak::Sampler;
+use super::track::TrackWriter;
 use anyhow::{bail, Context, Result};
 use iceoryx2::port::listener::Listener;
 use iceoryx2::prelude::*;
@@ -30,8 +39,9 @@ pub struct Collector {
 
 /// What a run produced.
 pub struct Collected {
-    /// Every estimate message (valid or not), in arrival order.
-    pub estimates: Vec<EstimateMsg>,
+    /// Estimate messages received (valid or not) and valid ones written to track.csv.
+    pub messages: u64,
+    pub valid: u64,
     /// The supervisor's own histograms (`transport` of the estimates hop).
     pub stats: StageStats,
     /// CLOCK_MONOTONIC when acquisition was started and when the stream ended.
@@ -39,6 +49,29 @@ pub struct Collected {
     pub end_ns: u64,
     /// Stopped by SIGINT/SIGTERM rather than the end of the stream.
     pub interrupted: bool,
+    /// Deaths, restarts and recoveries of the services.
+    pub supervision: Supervision,
+    /// The soak report's samples.
+    pub sampler: Sampler,
+}
+
+/// Whether an estimate may be written out after `last_t_s`.
+fn admissible(msg: &EstimateMsg, last_t_s: Option<f64>, stats: &mut StageStats) -> bool {
+    if last_t_s.is_some_and(|t| msg.t_s.partial_cmp(&t) != Some(std::cmp::Ordering::Greater)) {
+        stats.count("out_of_order", 1);
+        return false;
+    }
+    let finite = msg.t_s.is_finite()
+        && msg
+            .position
+            .iter()
+            .chain(&msg.yaw_bias_deg)
+            .all(|v| v.is_finite());
+    if msg.status == EstimateStatus::Ok as u32 && !finite {
+        stats.count("non_finite", 1);
+        return false;
+    }
+    true
 }
 
 impl Collector {
@@ -81,8 +114,15 @@ impl Collector {
         }
     }
 
-    /// Collects estimates until end of stream (drained) or a signal.
-    pub fn stream(self, services: &mut [Service]) -> Result<Collected> {
+    /// Collects estimates until end of stream (drained), `duration` or a signal.
+    pub fn stream(
+        self,
+        services: &mut [Service],
+        supervision: Supervision,
+        duration: Option<Duration>,
+        mut track: TrackWriter,
+        sampler: Sampler,
+    ) -> Result<Collected> {
         let waitset = WaitSetBuilder::new()
             .create::<Ipc>()
             .map_err(|e| anyhow::anyhow!("WaitSet: {e:?}"))?;
@@ -90,16 +130,21 @@ impl Collector {
             .attach_notification(&self.listener)
             .map_err(|e| anyhow::anyhow!("WaitSet attach: {e:?}"))?;
         let tick = waitset
-            .attach_interval(Duration::from_millis(100))
+            .attach_interval(Duration::from_millis(25))
             .map_err(|e| anyhow::anyhow!("WaitSet interval: {e:?}"))?;
         let progress = Progress::new();
         let mut c = Collected {
-            estimates: Vec::new(),
+            messages: 0,
+            valid: 0,
             stats: StageStats::new("supervisor"),
             start_ns: monotonic_ns(),
             end_ns: 0,
             interrupted: false,
+            supervision,
+            sampler,
         };
+        let started = Instant::now();
+        let mut last_t_s: Option<f64> = None;
         let mut eos_at: Option<Instant> = None;
         let mut last_estimate = Instant::now();
         let mut failure: Option<anyhow::Error> = None;
@@ -123,13 +168,36 @@ impl Collector {
                                 .record("transport", elapsed_us(msg.published_ns, wake_ns));
                             first = false;
                         }
-                        c.estimates.push(msg);
+                        c.supervision.on_estimate(&msg, wake_ns);
                         last_estimate = Instant::now();
+                        c.messages += 1;
+                        if admissible(&msg, last_t_s, &mut c.stats) {
+                            last_t_s = Some(msg.t_s);
+                            c.valid += (msg.status == EstimateStatus::Ok as u32) as u64;
+                            track.push(&msg)?;
+                        }
                     }
                 }
+                c.supervision.watch(services)?;
                 if id.has_event_from(&tick) {
-                    check_alive(services)?;
-                    progress.update(&c.estimates, c.start_ns);
+                    progress.update(c.valid, c.messages, c.start_ns);
+                    let restarts = c.supervision.restarts.len() as u64;
+                    c.sampler.tick(services, restarts)?;
+                }
+                if eos_at.is_none() && duration.is_some_and(|d| started.elapsed() >= d) {
+                    // `--run-for-s`: acquisition stops first, then the pipeline drains
+                    // like at the end of a stream.
+                    c.end_ns = monotonic_ns();
+                    eos_at = Some(Instant::now());
+                    c.supervision.cancel("acquisition");
+                    let acquisition = services.iter_mut().find(|s| s.name == "acquisition");
+                    if let Some(a) = acquisition.filter(|a| !a.accounted) {
+                        a.accounted = true;
+                        let status = a.stop(Duration::from_secs(5))?;
+                        if !status.success() {
+                            bail!("acquisition ended with {} when stopped", describe(status));
+                        }
+                    }
                 }
                 Ok(match eos_at {
                     Some(t) => last_estimate.elapsed() < DRAIN_QUIET && t.elapsed() < DRAIN_MAX,
@@ -145,7 +213,8 @@ impl Collector {
                 }
             }
         });
-        progress.finish(&c.estimates, c.start_ns);
+        progress.finish(c.valid, c.start_ns);
+        track.flush()?;
         if let Some(e) = failure {
             return Err(e);
         }
@@ -182,15 +251,16 @@ fn check_alive(services: &mut [Service]) -> Result<()> {
 struct Progress {
     bar: Option<ProgressBar>,
     last_line: std::cell::Cell<Instant>,
+    last_tick: std::cell::Cell<Instant>,
 }
 
-fn rate(estimates: &[EstimateMsg], start_ns: u64) -> (usize, f64) {
-    let ok = estimates
-        .iter()
-        .filter(|e| e.status == EstimateStatus::Ok as u32)
-        .count();
+fn rate(ok: u64, start_ns: u64) -> f64 {
     let secs = (monotonic_ns().saturating_sub(start_ns)) as f64 * 1e-9;
-    (ok, if secs > 0.0 { ok as f64 / secs } else { 0.0 })
+    if secs > 0.0 {
+        ok as f64 / secs
+    } else {
+        0.0
+    }
 }
 
 impl Progress {
@@ -206,15 +276,17 @@ impl Progress {
         Self {
             bar,
             last_line: std::cell::Cell::new(Instant::now()),
+            last_tick: std::cell::Cell::new(Instant::now()),
         }
     }
 
-    fn update(&self, estimates: &[EstimateMsg], start_ns: u64) {
-        let (ok, hz) = rate(estimates, start_ns);
-        let msg = format!(
-            "{ok} estimates, {hz:.1} per second ({} messages)",
-            estimates.len()
-        );
+    fn update(&self, ok: u64, messages: u64, start_ns: u64) {
+        if self.last_tick.get().elapsed() < Duration::from_millis(100) {
+            return;
+        }
+        self.last_tick.set(Instant::now());
+        let hz = rate(ok, start_ns);
+        let msg = format!("{ok} estimates, {hz:.1} per second ({messages} messages)");
         match &self.bar {
             Some(bar) => {
                 bar.set_message(msg);
@@ -228,9 +300,9 @@ impl Progress {
         }
     }
 
-    fn finish(&self, estimates: &[EstimateMsg], start_ns: u64) {
+    fn finish(&self, ok: u64, start_ns: u64) {
         if let Some(bar) = &self.bar {
-            let (ok, hz) = rate(estimates, start_ns);
+            let hz = rate(ok, start_ns);
             bar.finish_with_message(format!("{ok} estimates, {hz:.1} per second"));
         }
     }

@@ -5,10 +5,15 @@
 //! 2. Starts acquisition, which streams the live simulator (default) or a recording.
 //! 3. Collects the estimates (event-driven: a WaitSet on its wake listener, with a
 //!    100 ms tick for the progress bar and to watch the children).
-//! 4. On end of stream (after the pipeline has drained), SIGINT or SIGTERM: stops the
-//!    services, gathers their latency histograms and counters, and writes the outputs
-//!    (`outputs.rs`). A service that dies or fails to start ends the run with its name,
-//!    its exit status and a non-zero exit.
+//! 4. Restarts a service that dies (`restart.rs`; `--restart never` ends the run
+//!    instead). The services checkpoint their state under `<out>/state/`, so a
+//!    restarted one resumes: acquisition's stream position, matching's keyframe rings,
+//!    geolocation's filter.
+//! 5. On end of stream (after the pipeline has drained), `--run-for-s`, SIGINT or
+//!    SIGTERM: stops the services, gathers their latency histograms and counters, and
+//!    writes the outputs (`outputs.rs`). A service that fails to start, or dies more
+//!    often than the policy allows, ends the run with its name, its exit status and a
+//!    non-zero exit.
 
 mod accuracy;
 mod children;
@@ -16,6 +21,9 @@ mod collect;
 mod latency;
 mod outputs;
 pub(crate) mod plots;
+mod restart;
+mod soak;
+mod track;
 
 use anyhow::{bail, Context, Result};
 use children::Service;
@@ -47,6 +55,16 @@ pub struct RunArgs {
     /// Seconds to wait for the services to connect.
     #[arg(long, default_value_t = 30.0)]
     pub connect_timeout_s: f64,
+    /// End the run after this many seconds of streaming (with `--loop`: a soak of
+    /// fixed length). Not the simulated scenario's `--duration-s`.
+    #[arg(long)]
+    pub run_for_s: Option<f64>,
+    #[command(flatten)]
+    pub restart: restart::RestartArgs,
+    /// Soak report: sample every process's memory and descriptors and the stages'
+    /// latency this often (soak.csv, soak.png and a flatness verdict).
+    #[arg(long, default_value_t = 60.0)]
+    pub sample_every_s: f64,
 }
 
 /// Checks every section of the configuration before any process starts.
@@ -88,13 +106,31 @@ pub fn run(args: &RunArgs) -> Result<()> {
     }
     let out = &args.out;
     std::fs::create_dir_all(out).with_context(|| format!("create {}", out.display()))?;
+    if !(args.sample_every_s.is_finite() && args.sample_every_s >= 0.1) {
+        bail!(
+            "--sample-every-s must be at least 0.1 s, got {}",
+            args.sample_every_s
+        );
+    }
+    if let Some(d) = args.run_for_s {
+        if !(d.is_finite() && d > 0.0) {
+            bail!("--run-for-s must be a positive number of seconds, got {d}");
+        }
+    }
     let stats_dir = out.join("stats");
     let stream_dir = out.join("stream");
-    for dir in [&stats_dir, &stream_dir] {
+    let state_dir = out.join("state");
+    for dir in [&stats_dir, &stream_dir, &state_dir] {
         if dir.exists() {
             std::fs::remove_dir_all(dir).with_context(|| format!("clear {}", dir.display()))?;
         }
         std::fs::create_dir_all(dir).with_context(|| format!("create {}", dir.display()))?;
+    }
+    shared_types::checkpoint::create_dir(&state_dir)?;
+    {
+        use std::os::unix::fs::PermissionsExt;
+        std::fs::set_permissions(&state_dir, std::fs::Permissions::from_mode(0o700))
+            .with_context(|| format!("make {} owner-only", state_dir.display()))?;
     }
     let cleaned = clean_dead_nodes();
     if cleaned > 0 {
@@ -106,6 +142,8 @@ pub fn run(args: &RunArgs) -> Result<()> {
         run_id.clone(),
         "--stats-dir".into(),
         stats_dir.display().to_string(),
+        "--state-dir".into(),
+        state_dir.display().to_string(),
     ];
     if let Some(c) = &args.config {
         common.extend(["--config".into(), c.display().to_string()]);
@@ -150,7 +188,16 @@ pub fn run(args: &RunArgs) -> Result<()> {
         return Err(e);
     }
 
-    let outcome = collector.stream(&mut services);
+    let (_, _, origin) = outputs::source_facts(args, &stream_dir)?;
+    let track = track::TrackWriter::create(&out.join("track.csv"), origin)?;
+    let supervision = restart::Supervision::new(args.restart);
+    let duration = args.run_for_s.map(Duration::from_secs_f64);
+    let sampler = soak::Sampler::new(
+        out,
+        &stats_dir,
+        Duration::from_secs_f64(args.sample_every_s),
+    )?;
+    let outcome = collector.stream(&mut services, supervision, duration, track, sampler);
     let failures = children::stop_all(&mut services, Duration::from_secs(10));
     let collected = match outcome {
         Ok(c) => c,

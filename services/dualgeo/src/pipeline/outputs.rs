@@ -1,15 +1,20 @@
 //! What `dualgeo run` leaves in `--out`:
 //!
-//! - `track.csv`: one row per estimate: t_s, pair_seq, x_m, y_m, z_m, lat_deg, lon_deg,
-//!   alt_m (empty without a geodetic origin), yaw_bias_left_deg, yaw_bias_right_deg,
-//!   images_used, iterations, h_acc_m, v_acc_m (1σ horizontal and vertical accuracy).
+//! - `track.csv`: one row per estimate, written as the run goes (`track.rs`).
 //! - `track.geojson`: the track as a WGS84 LineString ([lon, lat, alt]) when the source
-//!   has an origin.
+//!   has an origin, made from track.csv at the end.
 //! - `path.png`: the estimated path against truth, when truth exists.
 //! - `latency/<row>.hgrm` and `latency.png`: the latency percentile distributions.
 //! - `report.json`: exactly `frames_in`, `pairs_in`, `estimates_out`, `frames_dropped`,
-//!   `accuracy` (null without truth), `latency_us`, `throughput_hz`.
-//! - `counters.json`: every stage's counters (drops by cause, rejections by reason).
+//!   `accuracy` (null without truth), `latency_us`, `throughput_hz`, `restarts` (per
+//!   service), `pairs_lost_in_restarts` and `recovery_ms` (death seen → estimates
+//!   resumed: count, p50, p99, max; null without restarts).
+//! - `counters.json`: every stage's counters (drops by cause, rejections by reason),
+//!   with `supervisor.restarts.<service>` and `supervisor.pairs_lost_in_restarts`.
+//! - `soak.csv`, `soak.png`: memory, descriptors and latency per `--sample-every-s`
+//!   (`soak.rs`), with the flatness verdict printed.
+//! - `restarts.csv`: one row per death (service, incarnation, status, and the
+//!   CLOCK_MONOTONIC times it was seen, restarted, and estimates resumed).
 //! - `stats/` (each stage's raw histograms) and `stream/` (what the live simulator
 //!   streamed: telemetry.csv, truth.csv).
 
@@ -17,11 +22,12 @@ use super::accuracy::{accuracy, pair_with_truth, Accuracy};
 use super::collect::Collected;
 use super::latency::{self, Gathered, LatencyReport};
 use super::plots;
+use super::track::{geodetic, read_back};
 use super::RunArgs;
 use acquisition::recording::{Origin, RecordingMeta};
 use anyhow::{Context, Result};
 use serde::Serialize;
-use shared_types::messages::{EstimateMsg, EstimateStatus};
+use shared_types::messages::EstimateMsg;
 use std::path::{Path, PathBuf};
 
 #[derive(Serialize)]
@@ -33,10 +39,78 @@ struct Report {
     accuracy: Option<Accuracy>,
     latency_us: LatencyReport,
     throughput_hz: f64,
+    restarts: std::collections::BTreeMap<String, u64>,
+    pairs_lost_in_restarts: u64,
+    recovery_ms: Option<Recovery>,
+}
+
+#[derive(Serialize)]
+struct Recovery {
+    count: usize,
+    /// Deaths after which no estimate came before the run ended.
+    unrecovered: usize,
+    p50: f64,
+    p99: f64,
+    max: f64,
+}
+
+fn recovery(c: &Collected) -> Option<Recovery> {
+    let restarts = &c.supervision.restarts;
+    if restarts.is_empty() {
+        return None;
+    }
+    let mut ms: Vec<f64> = restarts.iter().filter_map(|r| r.recovery_ms()).collect();
+    ms.sort_by(f64::total_cmp);
+    let pick = |q: f64| {
+        ms.get(((ms.len() as f64 * q).ceil() as usize).saturating_sub(1))
+            .copied()
+            .unwrap_or(f64::NAN)
+    };
+    Some(Recovery {
+        count: restarts.len(),
+        unrecovered: restarts.len() - ms.len(),
+        p50: pick(0.5),
+        p99: pick(0.99),
+        max: ms.last().copied().unwrap_or(f64::NAN),
+    })
+}
+
+fn write_restarts_csv(path: &Path, c: &Collected) -> Result<()> {
+    let mut w =
+        csv::Writer::from_path(path).with_context(|| format!("create {}", path.display()))?;
+    w.write_record([
+        "service",
+        "incarnation",
+        "status",
+        "died_ns",
+        "restarted_ns",
+        "resumed_ns",
+        "recovery_ms",
+        "pairs_lost",
+    ])?;
+    let opt = |v: Option<u64>| v.map_or(String::new(), |v| v.to_string());
+    for r in &c.supervision.restarts {
+        w.write_record([
+            r.service.to_string(),
+            r.incarnation.to_string(),
+            r.status.clone(),
+            r.died_ns.to_string(),
+            opt(r.restarted_ns),
+            opt(r.resumed_ns),
+            r.recovery_ms().map_or(String::new(), |v| format!("{v:.1}")),
+            r.pairs_lost().to_string(),
+        ])?;
+    }
+    w.flush()
+        .with_context(|| format!("write {}", path.display()))?;
+    Ok(())
 }
 
 /// Where truth lives, the frame rate and the geodetic origin of the run's source.
-fn source_facts(args: &RunArgs, stream_dir: &Path) -> Result<(PathBuf, f64, Option<Origin>)> {
+pub(super) fn source_facts(
+    args: &RunArgs,
+    stream_dir: &Path,
+) -> Result<(PathBuf, f64, Option<Origin>)> {
     if args.source == "sim" {
         let config = args.scenario.config()?;
         Ok((
@@ -51,88 +125,11 @@ fn source_facts(args: &RunArgs, stream_dir: &Path) -> Result<(PathBuf, f64, Opti
     }
 }
 
-/// Frames that entered the pipeline (or were due to) and never reached a geolocation
-/// attempt: pairs acquisition could not loan (×2), frames overwritten before detection
-/// or matching read them, frames matching skipped to stay current, and observation sets
-/// geolocation missed (×2).
 fn frames_dropped(g: &Gathered) -> u64 {
-    2 * g.counter("acquisition", "pairs_dropped")
-        + g.counter("detection", "frames_lost")
-        + g.counter("matching", "frames_lost")
-        + g.counter("matching", "frames_dropped")
-        + 2 * g.counter("geolocation", "sets_lost")
+    super::latency::frames_dropped_of(|stage, name| g.counter(stage, name))
 }
 
-fn geodetic(origin: &Origin, p: &[f64; 3]) -> (f64, f64, f64) {
-    let (lat, lon, alt) = map_3d::enu2geodetic(
-        p[0],
-        p[1],
-        p[2],
-        origin.lat_deg.to_radians(),
-        origin.lon_deg.to_radians(),
-        origin.alt_m,
-        map_3d::Ellipsoid::WGS84,
-    );
-    (lat.to_degrees(), lon.to_degrees(), alt)
-}
-
-/// 1σ horizontal and vertical accuracy (MAVLink CAMERA_TRACKING_GEO_STATUS's h_acc and
-/// v_acc): √(σ_x² + σ_y²) from the estimate's covariance, and σ_z. `None` when the
-/// estimator gave no finite figure.
-fn one_sigma(e: &EstimateMsg) -> Option<(f64, f64)> {
-    let h = (e.covariance[0] + e.covariance[5]).sqrt();
-    let v = e.altitude_std_error_m;
-    (h.is_finite() && v.is_finite()).then_some((h, v))
-}
-
-fn write_track_csv(path: &Path, estimates: &[&EstimateMsg], origin: Option<&Origin>) -> Result<()> {
-    let mut w =
-        csv::Writer::from_path(path).with_context(|| format!("create {}", path.display()))?;
-    w.write_record([
-        "t_s",
-        "pair_seq",
-        "x_m",
-        "y_m",
-        "z_m",
-        "lat_deg",
-        "lon_deg",
-        "alt_m",
-        "yaw_bias_left_deg",
-        "yaw_bias_right_deg",
-        "images_used",
-        "iterations",
-        "h_acc_m",
-        "v_acc_m",
-    ])?;
-    for e in estimates {
-        let geo = origin.map(|o| geodetic(o, &e.position));
-        let g = |f: fn(&(f64, f64, f64)) -> f64, digits: usize| {
-            geo.as_ref()
-                .map_or(String::new(), |v| format!("{:.*}", digits, f(v)))
-        };
-        w.write_record([
-            format!("{:.6}", e.t_s),
-            e.pair_seq.to_string(),
-            format!("{:.3}", e.position[0]),
-            format!("{:.3}", e.position[1]),
-            format!("{:.3}", e.position[2]),
-            g(|v| v.0, 8),
-            g(|v| v.1, 8),
-            g(|v| v.2, 3),
-            format!("{:.3}", e.yaw_bias_deg[0]),
-            format!("{:.3}", e.yaw_bias_deg[1]),
-            e.images_used.to_string(),
-            e.iterations.to_string(),
-            one_sigma(e).map_or(String::new(), |(h, _)| format!("{h:.3}")),
-            one_sigma(e).map_or(String::new(), |(_, v)| format!("{v:.3}")),
-        ])?;
-    }
-    w.flush()
-        .with_context(|| format!("write {}", path.display()))?;
-    Ok(())
-}
-
-fn write_geojson(path: &Path, estimates: &[&EstimateMsg], origin: &Origin) -> Result<()> {
+fn write_geojson(path: &Path, estimates: &[EstimateMsg], origin: &Origin) -> Result<()> {
     use geojson::{Feature, FeatureCollection, Geometry, Value};
     let line: Vec<Vec<f64>> = estimates
         .iter()
@@ -165,20 +162,19 @@ pub fn write_all(
     stream_dir: &Path,
     c: &Collected,
 ) -> Result<()> {
-    let gathered = Gathered::load(stats_dir, &c.stats)?;
+    let mut supervisor = c.stats.clone();
+    for (service, n) in c.supervision.counts() {
+        supervisor.count(&format!("restarts.{service}"), n);
+    }
+    supervisor.count("pairs_lost_in_restarts", c.supervision.pairs_lost());
+    let gathered = Gathered::load(stats_dir, &supervisor)?;
     let (truth_dir, frame_rate_hz, origin) = source_facts(args, stream_dir)?;
-    let ok: Vec<&EstimateMsg> = c
-        .estimates
-        .iter()
-        .filter(|e| e.status == EstimateStatus::Ok as u32)
-        .collect();
-
-    write_track_csv(&out.join("track.csv"), &ok, origin.as_ref())?;
+    let ok = read_back(&out.join("track.csv"))?;
     match &origin {
         Some(o) => write_geojson(&out.join("track.geojson"), &ok, o)?,
         None => eprintln!("the source has no geodetic origin: track.geojson not written"),
     }
-    let paired = pair_with_truth(&truth_dir, &c.estimates, frame_rate_hz)?;
+    let paired = pair_with_truth(&truth_dir, &ok, frame_rate_hz)?;
     let acc = paired.as_ref().and_then(accuracy);
     if let Some(p) = &paired {
         let est: Vec<[f64; 2]> = p
@@ -207,7 +203,15 @@ pub fn write_all(
         } else {
             0.0
         },
+        restarts: c.supervision.counts(),
+        pairs_lost_in_restarts: c.supervision.pairs_lost(),
+        recovery_ms: recovery(c),
     };
+    write_restarts_csv(&out.join("restarts.csv"), c)?;
+    let samples = &c.sampler.samples;
+    if !samples.is_empty() {
+        plots::soak(&out.join("soak.png"), samples)?;
+    }
     let json = serde_json::to_string_pretty(&report)?;
     std::fs::write(out.join("report.json"), &json).context("write report.json")?;
     std::fs::write(
@@ -234,6 +238,33 @@ pub fn write_all(
             a.yaw_bias_mae_deg.left, a.yaw_bias_mae_deg.right
         ),
         None => println!("accuracy: no truth for this source"),
+    }
+    if let Some(r) = &report.recovery_ms {
+        println!(
+            "restarts {} ({}), pairs lost in restarts {}, estimates resumed after p50 {:.0} ms, p99 {:.0} ms, max {:.0} ms{}",
+            r.count,
+            report
+                .restarts
+                .iter()
+                .filter(|(_, n)| **n > 0)
+                .map(|(s, n)| format!("{s} {n}"))
+                .collect::<Vec<_>>()
+                .join(", "),
+            report.pairs_lost_in_restarts,
+            r.p50,
+            r.p99,
+            r.max,
+            if r.unrecovered > 0 {
+                format!(" ({} without an estimate before the end)", r.unrecovered)
+            } else {
+                String::new()
+            }
+        );
+    }
+    if !samples.is_empty() {
+        for line in super::soak::verdict(samples) {
+            println!("{line}");
+        }
     }
     let bad = gathered.counter("acquisition", "bad_frames");
     if bad > 0 {

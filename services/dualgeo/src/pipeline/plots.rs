@@ -167,3 +167,99 @@ pub fn path_against_truth(path: &Path, estimated: &[[f64; 2]], truth: &[[f64; 2]
     root.present().map_err(err)?;
     Ok(())
 }
+
+/// A named line: (label, points).
+type Series = (String, Vec<(f64, f64)>);
+
+/// The soak report over time: each process's RSS (MiB, top) and each stage's p99 per
+/// interval (ms, bottom).
+pub fn soak(path: &Path, samples: &[super::soak::Sample]) -> Result<()> {
+    use super::soak::{LATENCIES, PROCESSES};
+    let text = font_available();
+    let root = BitMapBackend::new(path, (1000, 800)).into_drawing_area();
+    root.fill(&WHITE).map_err(err)?;
+    let (top, bottom) = root.split_vertically(400);
+    let t_max = samples.last().map_or(1.0, |s| s.t_s / 60.0).max(1e-3) * 1.02;
+    let panels: [(&str, Vec<Series>); 2] = [
+        (
+            "resident memory (MiB)",
+            PROCESSES
+                .iter()
+                .enumerate()
+                .map(|(i, p)| {
+                    let pts = samples
+                        .iter()
+                        .map(|s| (s.t_s / 60.0, s.rss_kib[i] as f64 / 1024.0))
+                        .collect();
+                    (p.to_string(), pts)
+                })
+                .collect(),
+        ),
+        (
+            "p99 per interval (ms)",
+            LATENCIES
+                .iter()
+                .enumerate()
+                .map(|(i, (stage, h))| {
+                    let pts = samples
+                        .iter()
+                        .filter(|s| s.p99_us[i] > 0)
+                        .map(|s| (s.t_s / 60.0, s.p99_us[i] as f64 / 1e3))
+                        .collect();
+                    let name = if *h == "compute" {
+                        stage.to_string()
+                    } else {
+                        h.to_string()
+                    };
+                    (name, pts)
+                })
+                .collect(),
+        ),
+    ];
+    for (area, (title, series)) in [top, bottom].iter().zip(panels) {
+        let y_max = series
+            .iter()
+            .flat_map(|(_, p)| p.iter().map(|v| v.1))
+            .fold(1e-3f64, f64::max)
+            * 1.15;
+        let mut builder = ChartBuilder::on(area);
+        builder
+            .margin(15)
+            .x_label_area_size(40)
+            .y_label_area_size(60);
+        if text {
+            builder.caption(title, ("sans-serif", 20));
+        }
+        let mut chart = builder
+            .build_cartesian_2d(0f64..t_max, 0f64..y_max)
+            .map_err(err)?;
+        let mut mesh = chart.configure_mesh();
+        mesh.x_desc("minutes").y_desc(title);
+        if !text {
+            mesh.disable_x_mesh().x_labels(0).y_labels(0);
+        }
+        mesh.draw().map_err(err)?;
+        for (i, (name, pts)) in series.into_iter().enumerate() {
+            let colour = COLOURS[i % COLOURS.len()];
+            let s = chart
+                .draw_series(LineSeries::new(pts, colour.stroke_width(2)))
+                .map_err(err)?;
+            if text {
+                s.label(name).legend(move |(x, y)| {
+                    PathElement::new(vec![(x, y), (x + 20, y)], colour.stroke_width(2))
+                });
+            }
+        }
+        if text {
+            chart
+                .configure_series_labels()
+                .background_style(WHITE.mix(0.8))
+                .border_style(BLACK)
+                .position(SeriesLabelPosition::LowerRight)
+                .draw()
+                .map_err(err)?;
+        }
+    }
+    root.present().map_err(err)?;
+    Ok(())
+}

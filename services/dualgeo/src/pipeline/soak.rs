@@ -1,0 +1,254 @@
+//! The soak report (issue #13): every `--sample-every-s` (default 60 s) the supervisor
+//! samples each process's resident memory and open file descriptors (from /proc), and
+//! each stage's latency p50 / p99 over the interval (the difference of the stages'
+//! cumulative histograms, which they save every second), the frames dropped in the
+//! interval and the restarts so far. Rows go to `soak.csv` as they are taken; at the
+//! end `soak.png` plots them and the run states whether memory and p99 stayed flat:
+//!
+//! - memory: every process's RSS within ±1 % of its first sample (taken after the
+//!   first interval, once the rings and caches are full);
+//! - latency: every interval's end-to-end p99 within ±20 % of the first interval's.
+
+use super::children::Service;
+use super::latency::frames_dropped_of;
+use anyhow::{Context, Result};
+use hdrhistogram::Histogram;
+use shared_types::stats::StageStats;
+use std::collections::BTreeMap;
+use std::fs::File;
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
+
+pub const PROCESSES: [&str; 5] = [
+    "supervisor",
+    "acquisition",
+    "detection",
+    "matching",
+    "geolocation",
+];
+/// (stage, histogram) per latency column.
+pub const LATENCIES: [(&str, &str); 4] = [
+    ("detection", "compute"),
+    ("matching", "compute"),
+    ("geolocation", "compute"),
+    ("geolocation", "end_to_end"),
+];
+pub const MEMORY_TOLERANCE: f64 = 0.01;
+pub const P99_TOLERANCE: f64 = 0.20;
+
+#[derive(Debug, Clone)]
+pub struct Sample {
+    pub t_s: f64,
+    pub rss_kib: [u64; 5],
+    pub fds: [u64; 5],
+    /// p50 and p99 per [`LATENCIES`] column over the interval, µs (0: no sample).
+    pub p50_us: [u64; 4],
+    pub p99_us: [u64; 4],
+    pub dropped: u64,
+    pub restarts: u64,
+}
+
+/// VmRSS (KiB) and the open descriptors of a process; zeros when it is gone.
+fn proc_figures(pid: u32) -> (u64, u64) {
+    let rss = std::fs::read_to_string(format!("/proc/{pid}/status"))
+        .ok()
+        .and_then(|s| {
+            s.lines()
+                .find_map(|l| l.strip_prefix("VmRSS:"))
+                .and_then(|v| v.split_whitespace().next()?.parse().ok())
+        })
+        .unwrap_or(0);
+    let fds = std::fs::read_dir(format!("/proc/{pid}/fd"))
+        .map(|d| d.count() as u64)
+        .unwrap_or(0);
+    (rss, fds)
+}
+
+pub struct Sampler {
+    every: Duration,
+    next: Instant,
+    start: Instant,
+    stats_dir: PathBuf,
+    csv: csv::Writer<File>,
+    /// Each stage's cumulative statistics at the previous sample.
+    prev: BTreeMap<String, StageStats>,
+    pub samples: Vec<Sample>,
+}
+
+impl Sampler {
+    pub fn new(out: &Path, stats_dir: &Path, every: Duration) -> Result<Self> {
+        let path = out.join("soak.csv");
+        let mut csv =
+            csv::Writer::from_path(&path).with_context(|| format!("create {}", path.display()))?;
+        let mut header = vec!["t_s".to_string()];
+        header.extend(PROCESSES.iter().map(|p| format!("rss_kib_{p}")));
+        header.extend(PROCESSES.iter().map(|p| format!("fds_{p}")));
+        for (stage, h) in LATENCIES {
+            header.push(format!("p50_us_{stage}_{h}"));
+            header.push(format!("p99_us_{stage}_{h}"));
+        }
+        header.extend(["frames_dropped".into(), "restarts".into()]);
+        csv.write_record(&header)?;
+        csv.flush()?;
+        Ok(Self {
+            every,
+            next: Instant::now() + every,
+            start: Instant::now(),
+            stats_dir: stats_dir.to_path_buf(),
+            csv,
+            prev: BTreeMap::new(),
+            samples: Vec::new(),
+        })
+    }
+
+    /// Takes a sample when one is due.
+    pub fn tick(&mut self, services: &[Service], restarts: u64) -> Result<()> {
+        if Instant::now() < self.next {
+            return Ok(());
+        }
+        self.next += self.every;
+        let mut rss_kib = [0; 5];
+        let mut fds = [0; 5];
+        for (i, name) in PROCESSES.iter().enumerate() {
+            let pid = match *name {
+                "supervisor" => Some(std::process::id()),
+                n => services.iter().find(|s| s.name == n).map(Service::pid),
+            };
+            (rss_kib[i], fds[i]) = pid.map_or((0, 0), proc_figures);
+        }
+        let mut now = BTreeMap::new();
+        for stage in super::children::SERVICES {
+            // A file being replaced is read at the next sample.
+            if let Ok(Some(s)) = StageStats::load_stage(&self.stats_dir, stage) {
+                now.insert(stage.to_string(), s);
+            }
+        }
+        let interval = |stage: &str, name: &str| -> Option<Histogram<u64>> {
+            let mut h = now.get(stage)?.histograms.get(name)?.clone();
+            if let Some(p) = self.prev.get(stage).and_then(|p| p.histograms.get(name)) {
+                h.subtract(p).ok()?;
+            }
+            Some(h)
+        };
+        let mut p50_us = [0; 4];
+        let mut p99_us = [0; 4];
+        for (i, (stage, name)) in LATENCIES.iter().enumerate() {
+            if let Some(h) = interval(stage, name).filter(|h| !h.is_empty()) {
+                p50_us[i] = h.value_at_quantile(0.5);
+                p99_us[i] = h.value_at_quantile(0.99);
+            }
+        }
+        let dropped_now = frames_dropped_of(|stage, c| now.get(stage).map_or(0, |s| s.counter(c)));
+        let dropped_before =
+            frames_dropped_of(|stage, c| self.prev.get(stage).map_or(0, |s| s.counter(c)));
+        let sample = Sample {
+            t_s: self.start.elapsed().as_secs_f64(),
+            rss_kib,
+            fds,
+            p50_us,
+            p99_us,
+            dropped: dropped_now.saturating_sub(dropped_before),
+            restarts,
+        };
+        let mut row = vec![format!("{:.1}", sample.t_s)];
+        row.extend(sample.rss_kib.iter().map(u64::to_string));
+        row.extend(sample.fds.iter().map(u64::to_string));
+        for i in 0..4 {
+            row.push(sample.p50_us[i].to_string());
+            row.push(sample.p99_us[i].to_string());
+        }
+        row.extend([sample.dropped.to_string(), sample.restarts.to_string()]);
+        self.csv.write_record(&row)?;
+        self.csv.flush()?;
+        self.samples.push(sample);
+        self.prev = now;
+        Ok(())
+    }
+}
+
+/// The largest relative departure of `values` from their first, or `None` with fewer
+/// than two values (or a first of 0).
+pub fn drift(values: impl IntoIterator<Item = u64>) -> Option<f64> {
+    let v: Vec<f64> = values.into_iter().map(|x| x as f64).collect();
+    let first = *v.first()?;
+    if v.len() < 2 || first <= 0.0 {
+        return None;
+    }
+    v.iter()
+        .map(|x| (x - first) / first)
+        .max_by(|a, b| a.abs().total_cmp(&b.abs()))
+}
+
+/// One line per criterion: whether memory and p99 stayed flat.
+pub fn verdict(samples: &[Sample]) -> Vec<String> {
+    let mut lines = Vec::new();
+    if samples.len() < 2 {
+        lines.push(format!(
+            "soak: {} sample(s); flatness needs two (run longer or lower --sample-every-s)",
+            samples.len()
+        ));
+        return lines;
+    }
+    let mut worst: Option<(&str, f64)> = None;
+    for (i, p) in PROCESSES.iter().enumerate() {
+        if let Some(d) = drift(samples.iter().map(|s| s.rss_kib[i])) {
+            if worst.is_none_or(|(_, w)| d.abs() > w.abs()) {
+                worst = Some((p, d));
+            }
+        }
+    }
+    if let Some((p, d)) = worst {
+        lines.push(format!(
+            "soak: RSS {} within ±{:.0} % of the first sample (largest drift: {p} {:+.2} %)",
+            if d.abs() <= MEMORY_TOLERANCE {
+                "stayed"
+            } else {
+                "did NOT stay"
+            },
+            MEMORY_TOLERANCE * 100.0,
+            d * 100.0
+        ));
+    }
+    let e2e: Vec<u64> = samples
+        .iter()
+        .map(|s| s.p99_us[3])
+        .filter(|v| *v > 0)
+        .collect();
+    if let Some(d) = drift(e2e.iter().copied()) {
+        lines.push(format!(
+            "soak: end-to-end p99 {} within ±{:.0} % of the first interval's {:.1} ms (largest drift {:+.1} %)",
+            if d.abs() <= P99_TOLERANCE { "stayed" } else { "did NOT stay" },
+            P99_TOLERANCE * 100.0,
+            e2e[0] as f64 / 1e3,
+            d * 100.0
+        ));
+    }
+    let dropped: u64 = samples.iter().map(|s| s.dropped).sum();
+    lines.push(format!(
+        "soak: {} samples over {:.0} s, {dropped} frames dropped, {} restarts",
+        samples.len(),
+        samples.last().map_or(0.0, |s| s.t_s),
+        samples.last().map_or(0, |s| s.restarts)
+    ));
+    lines
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn drift_is_the_largest_departure_from_the_first() {
+        assert_eq!(drift([100, 101, 100, 100]), Some(0.01));
+        assert_eq!(drift([100, 97, 102]), Some(-0.03));
+        assert_eq!(drift([100]), None);
+        assert_eq!(drift([0, 5]), None);
+    }
+
+    #[test]
+    fn the_process_figures_of_this_test_are_read() {
+        let (rss, fds) = proc_figures(std::process::id());
+        assert!(rss > 0 && fds >= 3, "{rss} KiB, {fds} fds");
+        assert_eq!(proc_figures(u32::MAX), (0, 0));
+    }
+}

@@ -1,0 +1,182 @@
+//! `track.csv`, written as the run goes (issue #13): one row per valid estimate,
+//! flushed at least every [`FLUSH_EVERY`], so a day-long run holds no estimate in
+//! memory and a killed supervisor leaves the track up to its last flush. The GeoJSON,
+//! the accuracy and the path plot are made from the file at the end
+//! ([`read_back`]).
+//!
+//! Columns: t_s, pair_seq, x_m, y_m, z_m, lat_deg, lon_deg, alt_m (empty without a
+//! geodetic origin), yaw_bias_left_deg, yaw_bias_right_deg, images_used, iterations,
+//! h_acc_m, v_acc_m (1σ horizontal and vertical accuracy).
+
+use acquisition::recording::Origin;
+use anyhow::{Context, Result};
+use shared_types::messages::{EstimateMsg, EstimateStatus};
+use std::fs::File;
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
+
+pub const FLUSH_EVERY: Duration = Duration::from_millis(500);
+
+const HEADER: [&str; 14] = [
+    "t_s",
+    "pair_seq",
+    "x_m",
+    "y_m",
+    "z_m",
+    "lat_deg",
+    "lon_deg",
+    "alt_m",
+    "yaw_bias_left_deg",
+    "yaw_bias_right_deg",
+    "images_used",
+    "iterations",
+    "h_acc_m",
+    "v_acc_m",
+];
+
+pub fn geodetic(origin: &Origin, p: &[f64; 3]) -> (f64, f64, f64) {
+    let (lat, lon, alt) = map_3d::enu2geodetic(
+        p[0],
+        p[1],
+        p[2],
+        origin.lat_deg.to_radians(),
+        origin.lon_deg.to_radians(),
+        origin.alt_m,
+        map_3d::Ellipsoid::WGS84,
+    );
+    (lat.to_degrees(), lon.to_degrees(), alt)
+}
+
+/// 1σ horizontal and vertical accuracy (MAVLink CAMERA_TRACKING_GEO_STATUS's h_acc and
+/// v_acc): √(σ_x² + σ_y²) from the estimate's covariance, and σ_z. `None` when the
+/// estimator gave no finite figure.
+pub fn one_sigma(e: &EstimateMsg) -> Option<(f64, f64)> {
+    let h = (e.covariance[0] + e.covariance[5]).sqrt();
+    let v = e.altitude_std_error_m;
+    (h.is_finite() && v.is_finite()).then_some((h, v))
+}
+
+pub struct TrackWriter {
+    path: PathBuf,
+    w: csv::Writer<File>,
+    origin: Option<Origin>,
+    last_flush: Instant,
+    /// Valid estimates written.
+    pub rows: u64,
+}
+
+impl TrackWriter {
+    pub fn create(path: &Path, origin: Option<Origin>) -> Result<Self> {
+        let mut w =
+            csv::Writer::from_path(path).with_context(|| format!("create {}", path.display()))?;
+        w.write_record(HEADER)?;
+        w.flush()?;
+        Ok(Self {
+            path: path.to_path_buf(),
+            w,
+            origin,
+            last_flush: Instant::now(),
+            rows: 0,
+        })
+    }
+
+    /// Writes `e` if it is a valid estimate.
+    pub fn push(&mut self, e: &EstimateMsg) -> Result<()> {
+        if e.status != EstimateStatus::Ok as u32 {
+            return Ok(());
+        }
+        let geo = self.origin.as_ref().map(|o| geodetic(o, &e.position));
+        let g = |f: fn(&(f64, f64, f64)) -> f64, digits: usize| {
+            geo.as_ref()
+                .map_or(String::new(), |v| format!("{:.*}", digits, f(v)))
+        };
+        let sigma = one_sigma(e);
+        self.w
+            .write_record([
+                format!("{:.6}", e.t_s),
+                e.pair_seq.to_string(),
+                format!("{:.3}", e.position[0]),
+                format!("{:.3}", e.position[1]),
+                format!("{:.3}", e.position[2]),
+                g(|v| v.0, 8),
+                g(|v| v.1, 8),
+                g(|v| v.2, 3),
+                format!("{:.3}", e.yaw_bias_deg[0]),
+                format!("{:.3}", e.yaw_bias_deg[1]),
+                e.images_used.to_string(),
+                e.iterations.to_string(),
+                sigma.map_or(String::new(), |(h, _)| format!("{h:.3}")),
+                sigma.map_or(String::new(), |(_, v)| format!("{v:.3}")),
+            ])
+            .with_context(|| format!("write {}", self.path.display()))?;
+        self.rows += 1;
+        if self.last_flush.elapsed() >= FLUSH_EVERY {
+            self.flush()?;
+        }
+        Ok(())
+    }
+
+    pub fn flush(&mut self) -> Result<()> {
+        self.last_flush = Instant::now();
+        self.w
+            .flush()
+            .with_context(|| format!("write {}", self.path.display()))
+    }
+}
+
+/// The valid estimates of a track file, with what the file keeps of them (time, pair,
+/// position, biases; the rest default), for the end-of-run outputs.
+pub fn read_back(path: &Path) -> Result<Vec<EstimateMsg>> {
+    let mut r = csv::Reader::from_path(path).with_context(|| format!("read {}", path.display()))?;
+    let mut out = Vec::new();
+    for (i, row) in r.records().enumerate() {
+        let row = row.with_context(|| format!("{} row {}", path.display(), i + 2))?;
+        let f = |k: usize| -> Result<f64> {
+            row.get(k)
+                .and_then(|v| v.parse::<f64>().ok())
+                .with_context(|| format!("{} row {} column {}", path.display(), i + 2, k + 1))
+        };
+        out.push(EstimateMsg {
+            t_s: f(0)?,
+            pair_seq: row.get(1).and_then(|v| v.parse().ok()).unwrap_or(0),
+            position: [f(2)?, f(3)?, f(4)?],
+            yaw_bias_deg: [f(8)?, f(9)?],
+            status: EstimateStatus::Ok as u32,
+            ..Default::default()
+        });
+    }
+    Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn rows_stream_to_disk_and_read_back() {
+        let dir = std::env::temp_dir().join(format!("dualgeo-track-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("track.csv");
+        let mut w = TrackWriter::create(&path, None).unwrap();
+        let mut e = EstimateMsg {
+            t_s: 1.5,
+            pair_seq: 45,
+            position: [1.0, -2.0, 3.25],
+            yaw_bias_deg: [20.5, -3.0],
+            status: EstimateStatus::Ok as u32,
+            ..Default::default()
+        };
+        w.push(&e).unwrap();
+        e.status = EstimateStatus::Rejected as u32;
+        w.push(&e).unwrap();
+        w.flush().unwrap();
+        // On disk before the writer is finished with.
+        let back = read_back(&path).unwrap();
+        assert_eq!(back.len(), 1);
+        assert_eq!((back[0].t_s, back[0].pair_seq), (1.5, 45));
+        assert_eq!(back[0].position, [1.0, -2.0, 3.25]);
+        assert_eq!(back[0].yaw_bias_deg, [20.5, -3.0]);
+        assert_eq!(w.rows, 1);
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+}
