@@ -69,9 +69,12 @@ fn pipeline_on_a_recording_and_a_corrupt_image() {
     ]);
     assert!(o.status.success(), "{}", text(&o.stderr));
 
-    // 1. A clean run at 10 pairs/s: estimates, sane accuracy, nothing dropped.
+    // 1. A clean run: estimates, sane accuracy, nothing dropped. Flow-controlled
+    // (`--rate max`), so "nothing dropped" holds however busy the machine is: at a
+    // fixed 10 pairs/s this assertion failed about once in ten runs when the other
+    // tests of this file (live simulator runs) took both cores (issue #13, item 9).
     let out = dir.s("out");
-    let o = dualgeo(&["run", "--source", &rec, "--rate", "10", "--out", &out]);
+    let o = dualgeo(&["run", "--source", &rec, "--rate", "max", "--out", &out]);
     let (stdout, stderr) = (text(&o.stdout), text(&o.stderr));
     assert!(o.status.success(), "{stdout}\n{stderr}");
     assert!(
@@ -356,4 +359,56 @@ fn a_service_that_keeps_dying_ends_the_run_after_max_restarts() {
     for name in ["dualgeo-acquis", "dualgeo-matchin", "dualgeo-geoloca"] {
         assert!(child_named(pid, name).is_none(), "{name} left running");
     }
+}
+
+/// Issue #13: bad live input is dropped and counted, never fatal. The live simulator
+/// delivers every kind of live-input fault in turn (`--inject-faults`); the run goes
+/// on and ends normally, each kind is counted, logged once when first seen and once in
+/// the totals, and estimates keep coming.
+#[test]
+fn live_input_faults_are_dropped_counted_and_the_run_goes_on() {
+    let dir = Scratch::new("live-faults");
+    // 300 pairs, flow-controlled: the same pairs and the same faults on every run,
+    // however busy the machine.
+    let o = dualgeo(&[
+        "run",
+        "--inject-faults",
+        "0.1",
+        "--duration-s",
+        "10",
+        "--rate",
+        "max",
+        "--out",
+        &dir.s("out"),
+    ]);
+    let (stdout, stderr) = (text(&o.stdout), text(&o.stderr));
+    assert!(o.status.success(), "{stdout}\n{stderr}");
+    let counters = json(&dir.join("out/counters.json"));
+    let kinds = [
+        "pose_not_finite",
+        "time_backwards",
+        "frame_without_pose",
+        "pose_without_frame",
+        "wrong_frame_size",
+        "clock_skew",
+        "telemetry_gap",
+    ];
+    for kind in kinds {
+        let n = counters[format!("acquisition.live_faults.{kind}")]
+            .as_u64()
+            .unwrap_or(0);
+        assert!(n > 0, "{kind} not counted: {counters}");
+        let first_seen = format!("\"{kind}\"");
+        assert_eq!(stderr.matches(&first_seen).count(), 1, "{kind}: {stderr}");
+    }
+    let totals = stderr
+        .lines()
+        .find(|l| l.contains("live input faults:"))
+        .unwrap_or_else(|| panic!("no totals line: {stderr}"));
+    for kind in kinds {
+        assert!(totals.contains(kind), "{totals}");
+    }
+    let report = json(&dir.join("out/report.json"));
+    assert!(report["estimates_out"].as_u64().unwrap() > 50, "{report}");
+    assert_eq!(report["restarts"]["acquisition"], 0, "{report}");
 }

@@ -20,15 +20,25 @@
 //! it; the clock is re-anchored so the resumed pair is due at once, and the simulator's
 //! stream log is appended to.
 //!
+//! Live input (issue #13): every pair passes [`LiveGate`] before it is sent; a pair with
+//! a non-finite pose, time going backwards, a frame without a pose or a pose without a
+//! frame, pixels of the wrong size, or left/right skew beyond the pairing window is
+//! dropped and counted (`live_faults.<kind>`); a telemetry gap is counted. The first
+//! fault of a kind is logged, the totals when the stream stops. `--inject-faults RATE`
+//! makes the live simulator deliver such faults (`injected_faults`, and
+//! `injected_lost` for the pairs a gap loses in transit).
+//!
 //! Histograms (µs): `produce` (render or decode of a pair), `pacing_lag` (how late a
 //! pair left against its schedule), `resume` (skipping to the checkpointed position).
 //! Counters: `pairs_in`, `frames_in`, `pairs_dropped`, `bad_frames`, `loops`,
 //! `flow_timeouts`, `resumed`, `checkpoint_refused`, `checkpoint_failed`.
 
+use acquisition::live_gate::{LiveGate, LiveSample};
 use acquisition::recording::{
     decode_image_into, Recording, StereoPair, StreamLog, TelemetryRow, TruthRow,
 };
 use acquisition::resume::StreamPosition;
+use acquisition::sim::faults::FaultInjector;
 use acquisition::sim::{ScenarioArgs, SimConfig, Simulator};
 use anyhow::{bail, Context, Result};
 use clap::Parser;
@@ -312,6 +322,15 @@ fn main() -> Result<()> {
     });
     let distortion = [Uav::Left, Uav::Right].map(|u| source.distortion(u));
     let mut saver = StatsSaver::new(&args.service);
+    let mut gate = LiveGate::new((width, height), source.period_s());
+    let mut injector = match (&source, args.scenario.inject_faults) {
+        (Source::Sim { config, .. }, Some(rate)) => Some(
+            FaultInjector::new(config.seed, rate)
+                .with_context(|| format!("--inject-faults must be in [0, 1], got {rate}"))?,
+        ),
+        (_, Some(_)) => bail!("--inject-faults works with the live simulator only"),
+        _ => None,
+    };
     tracing::info!(run = endpoint.run_id(), source = %args.source, width, height, ?rate, "acquisition streaming");
 
     let mut start_ns = monotonic_ns();
@@ -326,6 +345,13 @@ fn main() -> Result<()> {
     } = position;
     let mut signalled = false;
     'stream: loop {
+        // Paced pairs usually wait (and see a stop request there), but a source slower
+        // than its clock, or one whose pairs are all dropped, never does: look once per
+        // pair.
+        if endpoint.node.wait(Duration::ZERO).is_err() {
+            signalled = true;
+            break 'stream;
+        }
         if let Some(listener) = &acks {
             let mut waited = false;
             while seq.saturating_sub(acknowledged) >= MAX_IN_FLIGHT {
@@ -386,6 +412,33 @@ fn main() -> Result<()> {
             Some(Ok(info)) => info,
         };
         position.consumed += 1;
+        // The gate sees the stream's clock (a loop goes on forward), as a live source's.
+        let mut delivered = info.poses.map(|pose| LiveSample {
+            t_s: info.t_s + t_offset,
+            pose: Some(pose),
+            size: Some((width, height)),
+        });
+        if let Some(inj) = injector.as_mut() {
+            let before = inj.injected;
+            let arrived = inj.apply(&mut delivered, source.period_s());
+            stats.count("injected_faults", inj.injected - before);
+            if !arrived {
+                stats.count("injected_lost", 1);
+                continue;
+            }
+        }
+        let faults_before = gate.total();
+        let checked = gate.check(&delivered);
+        if gate.total() != faults_before {
+            for (fault, n) in gate.counts() {
+                stats
+                    .counters
+                    .insert(format!("live_faults.{}", fault.name()), *n);
+            }
+        }
+        if checked.is_err() {
+            continue;
+        }
         let captured = monotonic_ns();
         stats.record("produce", elapsed_us(produce_start, captured));
         let t_first_pair = *t_first.get_or_insert(info.t_s);
@@ -474,15 +527,17 @@ fn main() -> Result<()> {
         stats.count("frames_in", 2);
         seq += 1;
         saver.tick(&stats);
-        // Paced pairs usually wait (and see a stop request there), but a source slower
-        // than its clock never does: look once per pair.
-        if endpoint.node.wait(Duration::ZERO).is_err() {
-            signalled = true;
-            break 'stream;
-        }
     }
     if let Some(log) = log {
         log.finish()?;
+    }
+    if !gate.counts().is_empty() {
+        let totals: Vec<String> = gate
+            .counts()
+            .iter()
+            .map(|(f, n)| format!("{} {n}", f.name()))
+            .collect();
+        tracing::warn!("live input faults: {}", totals.join(", "));
     }
     if !signalled {
         tracing::info!(pairs = seq, "end of stream");

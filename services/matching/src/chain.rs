@@ -466,21 +466,21 @@ impl VisionChain {
         let threads = self.config.match_threads.clamp(1, work.len().max(1));
         let per_thread = work.len().div_ceil(threads);
         let results: Vec<PastResult> = if threads > 1 {
-            std::thread::scope(|scope| {
-                let handles: Vec<_> = work
-                    .chunks(per_thread)
-                    .skip(1)
-                    .map(|chunk| scope.spawn(|| run(chunk)))
-                    .collect();
-                let mut out = run(work.chunks(per_thread).next().unwrap_or(&[]));
-                for h in handles {
-                    match h.join() {
-                        Ok(part) => out.extend(part),
-                        Err(panic) => std::panic::resume_unwind(panic),
-                    }
+            // On rayon's persistent pool, never a thread per call: OpenCV keeps
+            // per-thread data of every thread that called it (issue #13's leak).
+            let chunks: Vec<&[_]> = work.chunks(per_thread).collect();
+            let mut parts: Vec<Vec<PastResult>> = chunks.iter().map(|_| Vec::new()).collect();
+            let run = &run;
+            rayon::in_place_scope(|scope| {
+                let (first, rest) = parts.split_at_mut(1);
+                for (slot, chunk) in rest.iter_mut().zip(&chunks[1..]) {
+                    scope.spawn(move |_| *slot = run(chunk));
                 }
-                out
-            })
+                if let (Some(slot), Some(chunk)) = (first.first_mut(), chunks.first()) {
+                    *slot = run(chunk);
+                }
+            });
+            parts.into_iter().flatten().collect()
         } else {
             run(&work)
         };

@@ -1,8 +1,8 @@
 //! `dualgeo-matching`: the matching service shell.
 //!
 //! - On a frame: ORB on the pixels in place (a `Mat` over the shared-memory sample), the
-//!   left and right frames of a pair in parallel on two threads (crossbeam scoped
-//!   threads); the sample is released as soon as its features exist.
+//!   left and right frames of a pair in parallel (the left on a thread of rayon's
+//!   persistent pool); the sample is released as soon as its features exist.
 //! - On a detection: once both frames of a pair have features and both detections are
 //!   in, corresponding-point matching against the keyframe rings (Section 2.3), an
 //!   [`ObservationSetMsg`] to geolocation, then the pair is offered to the rings.
@@ -78,7 +78,7 @@ struct Matcher {
     unsaved: [bool; 2],
 }
 
-/// Features of the left frame from the second ORB thread, with its counts.
+/// Features of the left frame from the pool thread, with its counts.
 type LeftFeatures = (FrameHeader, Arc<Features>, ChainCounts);
 
 /// A frame's pixels with what its header says (no detection yet: ORB does not need it).
@@ -160,17 +160,20 @@ impl Matcher {
             let (features, counts) = extract_undistorted(orb, &input(&header, &mat))?;
             Ok(Some((header, Arc::new(features), counts)))
         };
-        // Left on a second thread, right on this one.
+        // Left on a pool thread, right on this one. The pool's threads live as long as
+        // the process: OpenCV 4.6 keeps per-thread data (cv::TLSDataContainer, from
+        // parallel_for_) of every thread that ever called it, so a thread per pair
+        // leaked ~15 KB/s (heaptrack; issue #13).
         let (l, r) = if left.is_some() && right.is_some() {
-            crossbeam::thread::scope(|scope| {
-                let handle = scope.spawn(|_| extract_left(worker_orb));
-                let r = extract_right(chain);
-                let l = handle
-                    .join()
-                    .unwrap_or_else(|_| Err(anyhow::anyhow!("ORB thread panicked")));
-                (l, r)
-            })
-            .map_err(|_| anyhow::anyhow!("ORB thread panicked"))?
+            let mut l = None;
+            let r = rayon::in_place_scope(|scope| {
+                scope.spawn(|_| l = Some(extract_left(worker_orb)));
+                extract_right(chain)
+            });
+            (
+                l.unwrap_or_else(|| Err(anyhow::anyhow!("the left ORB task did not run"))),
+                r,
+            )
         } else {
             (extract_left(worker_orb), extract_right(chain))
         };

@@ -7,6 +7,7 @@
 
 pub mod city;
 pub mod degrade;
+pub mod faults;
 pub mod lens;
 pub mod motion;
 pub mod record;

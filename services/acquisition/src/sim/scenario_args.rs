@@ -19,6 +19,10 @@ pub struct ScenarioArgs {
     /// Override the preset's noise seed.
     #[arg(long)]
     pub seed: Option<u64>,
+    /// Live simulator only: inject a live-input fault into this share of the pairs
+    /// (0–1; kinds in turn; `acquisition::sim::faults`), to exercise the live-input gate.
+    #[arg(long)]
+    pub inject_faults: Option<f64>,
 }
 
 impl ScenarioArgs {
@@ -53,6 +57,9 @@ impl ScenarioArgs {
         }
         if let Some(s) = self.seed {
             out.extend(["--seed".into(), s.to_string()]);
+        }
+        if let Some(r) = self.inject_faults {
+            out.extend(["--inject-faults".into(), r.to_string()]);
         }
         out
     }

@@ -65,6 +65,10 @@ pub struct RunArgs {
     /// latency this often (soak.csv, soak.png and a flatness verdict).
     #[arg(long, default_value_t = 60.0)]
     pub sample_every_s: f64,
+    /// Samples before this are left out of the soak verdict (rings, caches and pools
+    /// fill first).
+    #[arg(long, default_value_t = 60.0)]
+    pub soak_warm_up_s: f64,
 }
 
 /// Checks every section of the configuration before any process starts.

@@ -262,7 +262,7 @@ pub fn write_all(
         );
     }
     if !samples.is_empty() {
-        for line in super::soak::verdict(samples) {
+        for line in super::soak::verdict(samples, args.soak_warm_up_s) {
             println!("{line}");
         }
     }

@@ -5,9 +5,10 @@
 //! interval and the restarts so far. Rows go to `soak.csv` as they are taken; at the
 //! end `soak.png` plots them and the run states whether memory and p99 stayed flat:
 //!
-//! - memory: every process's RSS within ±1 % of its first sample (taken after the
-//!   first interval, once the rings and caches are full);
-//! - latency: every interval's end-to-end p99 within ±20 % of the first interval's.
+//! - memory: every process's RSS within ±1 % of its first sample after the warm-up
+//!   (`--soak-warm-up-s`, default 60 s: the rings, caches and pools fill first);
+//! - latency: every interval's end-to-end p99 after the warm-up within ±20 % of the
+//!   first such interval's.
 
 use super::children::Service;
 use super::latency::frames_dropped_of;
@@ -179,12 +180,14 @@ pub fn drift(values: impl IntoIterator<Item = u64>) -> Option<f64> {
         .max_by(|a, b| a.abs().total_cmp(&b.abs()))
 }
 
-/// One line per criterion: whether memory and p99 stayed flat.
-pub fn verdict(samples: &[Sample]) -> Vec<String> {
+/// One line per criterion: whether memory and p99 stayed flat after `warm_up_s`.
+pub fn verdict(all: &[Sample], warm_up_s: f64) -> Vec<String> {
     let mut lines = Vec::new();
+    let start = all.partition_point(|s| s.t_s < warm_up_s - 1e-6);
+    let samples = &all[start..];
     if samples.len() < 2 {
         lines.push(format!(
-            "soak: {} sample(s); flatness needs two (run longer or lower --sample-every-s)",
+            "soak: {} sample(s) after the {warm_up_s:.0} s warm-up; flatness needs two (run longer, or lower --sample-every-s or --soak-warm-up-s)",
             samples.len()
         ));
         return lines;
@@ -199,7 +202,7 @@ pub fn verdict(samples: &[Sample]) -> Vec<String> {
     }
     if let Some((p, d)) = worst {
         lines.push(format!(
-            "soak: RSS {} within ±{:.0} % of the first sample (largest drift: {p} {:+.2} %)",
+            "soak: RSS {} within ±{:.0} % of the first sample after the warm-up (largest drift: {p} {:+.2} %)",
             if d.abs() <= MEMORY_TOLERANCE {
                 "stayed"
             } else {
@@ -223,12 +226,12 @@ pub fn verdict(samples: &[Sample]) -> Vec<String> {
             d * 100.0
         ));
     }
-    let dropped: u64 = samples.iter().map(|s| s.dropped).sum();
+    let dropped: u64 = all.iter().map(|s| s.dropped).sum();
     lines.push(format!(
         "soak: {} samples over {:.0} s, {dropped} frames dropped, {} restarts",
-        samples.len(),
-        samples.last().map_or(0.0, |s| s.t_s),
-        samples.last().map_or(0, |s| s.restarts)
+        all.len(),
+        all.last().map_or(0.0, |s| s.t_s),
+        all.last().map_or(0, |s| s.restarts)
     ));
     lines
 }

@@ -1,0 +1,107 @@
+//! Issue #13's CI soak: a looped recording for 60 s with the soak report sampled every
+//! 5 s. The report is written as the run goes (soak.csv, track.csv readable while it
+//! runs), every process is sampled, no descriptor leaks after the warm-up, and memory
+//! stays within 2 % over the 40 s after it (the 1 % target is for the 1 h soak in
+//! docs/reliability.md: 40 s cannot show a slow leak, a fast one it can).
+
+use std::path::PathBuf;
+use std::process::{Command, Stdio};
+use std::time::Duration;
+
+struct Scratch(PathBuf);
+
+impl Drop for Scratch {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.0);
+    }
+}
+
+#[test]
+fn a_sixty_second_soak_reports_flat_memory_and_streams_its_outputs() {
+    let dir =
+        Scratch(std::env::temp_dir().join(format!("dualgeo-e2e-soak-{}", std::process::id())));
+    let _ = std::fs::remove_dir_all(&dir.0);
+    let rec = dir.0.join("rec");
+    let out = dir.0.join("out");
+    let o = Command::new(env!("CARGO_BIN_EXE_dualgeo"))
+        .args([
+            "simulate",
+            "--preset",
+            "default",
+            "--duration-s",
+            "4",
+            "--out",
+        ])
+        .arg(&rec)
+        .output()
+        .expect("spawn dualgeo simulate");
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let run = Command::new(env!("CARGO_BIN_EXE_dualgeo"))
+        .args([
+            "run",
+            "--loop",
+            "--run-for-s",
+            "60",
+            "--sample-every-s",
+            "5",
+        ])
+        .args(["--soak-warm-up-s", "20", "--source"])
+        .arg(&rec)
+        .arg("--out")
+        .arg(&out)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("spawn dualgeo run");
+    // Streamed: half-way through, the track and the soak rows are already on disk.
+    std::thread::sleep(Duration::from_secs(35));
+    let rows = |f: &str| {
+        std::fs::read_to_string(out.join(f))
+            .map(|t| t.lines().count())
+            .unwrap_or(0)
+    };
+    let (track_mid, soak_mid) = (rows("track.csv"), rows("soak.csv"));
+    let o = run.wait_with_output().expect("wait for dualgeo run");
+    let (stdout, stderr) = (
+        String::from_utf8_lossy(&o.stdout),
+        String::from_utf8_lossy(&o.stderr),
+    );
+    assert!(o.status.success(), "{stdout}\n{stderr}");
+    assert!(track_mid > 50, "track.csv had {track_mid} lines after 35 s");
+    assert!(soak_mid >= 5, "soak.csv had {soak_mid} lines after 35 s");
+    assert!(rows("track.csv") > track_mid);
+    assert!(out.join("soak.png").is_file());
+    assert!(stdout.contains("soak: RSS"), "{stdout}");
+
+    let text = std::fs::read_to_string(out.join("soak.csv")).unwrap();
+    let header: Vec<&str> = text.lines().next().unwrap().split(',').collect();
+    let samples: Vec<Vec<f64>> = text
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').map(|v| v.parse().unwrap()).collect())
+        .collect();
+    assert!(samples.len() >= 11, "{} samples", samples.len());
+    let after: Vec<&Vec<f64>> = samples.iter().filter(|s| s[0] >= 20.0).collect();
+    for (col, name) in header.iter().enumerate() {
+        let values: Vec<f64> = after.iter().map(|s| s[col]).collect();
+        if name.starts_with("rss_kib_") {
+            assert!(values.iter().all(|v| *v > 1000.0), "{name}: {values:?}");
+            let first = values[0];
+            let worst = values
+                .iter()
+                .map(|v| (v - first).abs() / first)
+                .fold(0.0, f64::max);
+            assert!(
+                worst <= 0.02,
+                "{name} drifted {:.1} %: {values:?}",
+                worst * 100.0
+            );
+        }
+        if name.starts_with("fds_") {
+            assert!(
+                values.iter().all(|v| *v == values[0] && *v > 2.0),
+                "{name}: {values:?}"
+            );
+        }
+    }
+}
