@@ -9,28 +9,16 @@
 #[path = "support/chaos.rs"]
 mod chaos;
 
+#[path = "support/scratch.rs"]
+mod scratch;
+
 use chaos::{kill_services, read_restarts, recoveries, Rng, SERVICES};
-use std::path::{Path, PathBuf};
+use scratch::{json, Scratch};
 use std::process::{Command, Stdio};
-
-struct Scratch(PathBuf);
-
-impl Drop for Scratch {
-    fn drop(&mut self) {
-        let _ = std::fs::remove_dir_all(&self.0);
-    }
-}
-
-fn json(path: &Path) -> serde_json::Value {
-    let t = std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
-    serde_json::from_str(&t).unwrap_or_else(|e| panic!("{}: {e}", path.display()))
-}
 
 #[test]
 fn services_killed_at_random_moments_are_restarted_and_the_track_goes_on() {
-    let dir =
-        Scratch(std::env::temp_dir().join(format!("dualgeo-e2e-chaos-{}", std::process::id())));
-    let _ = std::fs::remove_dir_all(&dir.0);
+    let dir = Scratch::new("chaos");
     let rec = dir.0.join("rec");
     let out = dir.0.join("out");
     let o = Command::new(env!("CARGO_BIN_EXE_dualgeo"))

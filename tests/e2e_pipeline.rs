@@ -1,8 +1,14 @@
 //! End-to-end: `dualgeo run`, the four real service processes over iceoryx2, on a short
 //! simulated recording.
 
-use std::path::{Path, PathBuf};
-use std::process::{Command, Output, Stdio};
+#[path = "support/chaos.rs"]
+mod chaos;
+#[path = "support/scratch.rs"]
+mod scratch;
+
+use chaos::{service_pid, wait_all_running};
+use scratch::{json, Scratch};
+use std::process::{Child, Command, Output, Stdio};
 use std::time::{Duration, Instant};
 
 fn dualgeo(args: &[&str]) -> Output {
@@ -14,36 +20,6 @@ fn dualgeo(args: &[&str]) -> Output {
 
 fn text(b: &[u8]) -> String {
     String::from_utf8_lossy(b).into_owned()
-}
-
-/// A scratch folder removed when dropped, even if the test fails.
-struct Scratch(PathBuf);
-
-impl Scratch {
-    fn new(name: &str) -> Self {
-        let p = std::env::temp_dir().join(format!("dualgeo-e2e-{}-{name}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&p);
-        Self(p)
-    }
-
-    fn join(&self, p: &str) -> PathBuf {
-        self.0.join(p)
-    }
-
-    fn s(&self, p: &str) -> String {
-        self.join(p).display().to_string()
-    }
-}
-
-impl Drop for Scratch {
-    fn drop(&mut self) {
-        let _ = std::fs::remove_dir_all(&self.0);
-    }
-}
-
-fn json(path: &Path) -> serde_json::Value {
-    let t = std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
-    serde_json::from_str(&t).unwrap_or_else(|e| panic!("{}: {e}", path.display()))
 }
 
 fn keys(v: &serde_json::Value) -> Vec<String> {
@@ -247,26 +223,22 @@ fn bad_input_at_the_boundary_is_a_clear_error() {
     );
 }
 
-/// The children of `pid` whose executable name starts with `name`.
-fn child_named(pid: u32, name: &str) -> Option<u32> {
-    for entry in std::fs::read_dir("/proc").ok()?.flatten() {
-        let Ok(child) = entry.file_name().to_string_lossy().parse::<u32>() else {
-            continue;
-        };
-        let Ok(stat) = std::fs::read_to_string(format!("/proc/{child}/stat")) else {
-            continue;
-        };
-        // pid (comm) state ppid ...
-        let (Some(open), Some(close)) = (stat.find('('), stat.rfind(')')) else {
-            continue;
-        };
-        let comm = &stat[open + 1..close];
-        let ppid = stat[close + 2..].split_whitespace().nth(1);
-        if comm.starts_with(name) && ppid == Some(&pid.to_string()) {
-            return Some(child);
-        }
+/// `dualgeo run ARGS` with its output captured.
+fn spawn_run(args: &[&str]) -> Child {
+    Command::new(env!("CARGO_BIN_EXE_dualgeo"))
+        .arg("run")
+        .args(args)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("spawn dualgeo")
+}
+
+/// No service of the run `pid` is left but (at most) `except`.
+fn assert_stopped(pid: u32, except: &str) {
+    for name in chaos::SERVICES.iter().filter(|s| **s != except) {
+        assert!(service_pid(pid, name).is_none(), "{name} left running");
     }
-    None
 }
 
 /// With `--restart never`, a service that dies mid-run ends the run with its name and
@@ -274,33 +246,15 @@ fn child_named(pid: u32, name: &str) -> Option<u32> {
 #[test]
 fn a_dying_service_ends_the_run_clearly() {
     let dir = Scratch::new("dying");
-    let run = Command::new(env!("CARGO_BIN_EXE_dualgeo"))
-        .args([
-            "run",
-            "--loop",
-            "--restart",
-            "never",
-            "--out",
-            &dir.s("out"),
-        ])
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .expect("spawn dualgeo");
+    let run = spawn_run(&["--loop", "--restart", "never", "--out", &dir.s("out")]);
     let pid = run.id();
-    // Wait until acquisition is up (all four are then running), then kill matching.
-    let deadline = Instant::now() + Duration::from_secs(60);
-    let victim = loop {
-        if let (Some(_), Some(m)) = (
-            child_named(pid, "dualgeo-acquis"),
-            child_named(pid, "dualgeo-matchin"),
-        ) {
-            break m;
-        }
-        assert!(Instant::now() < deadline, "services did not start");
-        std::thread::sleep(Duration::from_millis(100));
-    };
+    // Wait until all four run, then kill matching.
+    assert!(
+        wait_all_running(pid, Duration::from_secs(60)),
+        "services did not start"
+    );
     std::thread::sleep(Duration::from_millis(1500));
+    let victim = service_pid(pid, "matching").expect("matching runs");
     // SAFETY: kill(2) on a pid read from /proc just now.
     unsafe { libc::kill(victim as i32, libc::SIGKILL) };
     let o = run.wait_with_output().expect("wait for dualgeo");
@@ -310,9 +264,7 @@ fn a_dying_service_ends_the_run_clearly() {
         stderr.contains("matching service ended unexpectedly (signal 9)"),
         "{stderr}"
     );
-    for name in ["dualgeo-acquis", "dualgeo-detecti", "dualgeo-geoloca"] {
-        assert!(child_named(pid, name).is_none(), "{name} left running");
-    }
+    assert_stopped(pid, "matching");
 }
 
 /// Under the default policy a dead service is restarted, but one that dies more often
@@ -320,26 +272,14 @@ fn a_dying_service_ends_the_run_clearly() {
 #[test]
 fn a_service_that_keeps_dying_ends_the_run_after_max_restarts() {
     let dir = Scratch::new("crash-loop");
-    let run = Command::new(env!("CARGO_BIN_EXE_dualgeo"))
-        .args([
-            "run",
-            "--loop",
-            "--max-restarts",
-            "1",
-            "--out",
-            &dir.s("out"),
-        ])
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .expect("spawn dualgeo");
+    let run = spawn_run(&["--loop", "--max-restarts", "1", "--out", &dir.s("out")]);
     let pid = run.id();
     let deadline = Instant::now() + Duration::from_secs(60);
     let mut killed = Vec::new();
     while killed.len() < 2 {
         assert!(Instant::now() < deadline, "detection was not (re)started");
-        if child_named(pid, "dualgeo-acquis").is_some() {
-            if let Some(d) = child_named(pid, "dualgeo-detecti").filter(|d| !killed.contains(d)) {
+        if wait_all_running(pid, Duration::from_secs(30)) {
+            if let Some(d) = service_pid(pid, "detection").filter(|d| !killed.contains(d)) {
                 std::thread::sleep(Duration::from_millis(500));
                 // SAFETY: kill(2) on a pid read from /proc just now.
                 unsafe { libc::kill(d as i32, libc::SIGKILL) };
@@ -356,9 +296,7 @@ fn a_service_that_keeps_dying_ends_the_run_after_max_restarts() {
         stderr.contains("detection service died 2 times within 60 s"),
         "{stderr}"
     );
-    for name in ["dualgeo-acquis", "dualgeo-matchin", "dualgeo-geoloca"] {
-        assert!(child_named(pid, name).is_none(), "{name} left running");
-    }
+    assert_stopped(pid, "detection");
 }
 
 /// Issue #13: bad live input is dropped and counted, never fatal. The live simulator

@@ -2,6 +2,7 @@
 //! hdrhistogram and a one-line percentile summary.
 
 use hdrhistogram::Histogram;
+use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
 /// Percentiles of a histogram (the same struct the latency report uses; here the
@@ -46,4 +47,20 @@ pub fn time_calls(
         i += 1;
     }
     h
+}
+
+/// The `dualgeo` binary next to the running bench binary (both in target/release).
+pub fn dualgeo_binary() -> anyhow::Result<PathBuf> {
+    let exe = std::env::current_exe()?;
+    let path = exe
+        .parent()
+        .ok_or_else(|| anyhow::anyhow!("bench binary has no folder"))?
+        .join("dualgeo");
+    if !path.is_file() {
+        anyhow::bail!(
+            "{} not found: run `cargo build --release --workspace` first",
+            path.display()
+        );
+    }
+    Ok(path)
 }

@@ -14,7 +14,7 @@
 #[path = "../../../tests/support/chaos.rs"]
 mod chaos;
 
-use anyhow::{bail, Context, Result};
+use anyhow::{bail, Result};
 use chaos::{kill_services, quantile, read_restarts, recoveries, Rng, SERVICES};
 use clap::Parser;
 use std::path::PathBuf;
@@ -39,18 +39,7 @@ struct Args {
 }
 
 fn dualgeo() -> Result<PathBuf> {
-    let exe = std::env::current_exe()?;
-    let path = exe
-        .parent()
-        .context("bench binary has no folder")?
-        .join("dualgeo");
-    if !path.is_file() {
-        bail!(
-            "{} not found: run `cargo build --release --workspace` first",
-            path.display()
-        );
-    }
-    Ok(path)
+    dualgeo_bench::dualgeo_binary()
 }
 
 fn main() -> Result<()> {

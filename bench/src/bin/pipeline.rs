@@ -9,7 +9,7 @@
 //! Needs the workspace's binaries (`cargo build --release --workspace`).
 //! Run: `cargo run --release -p dualgeo-bench --bin pipeline [-- --duration-s 20]`
 
-use anyhow::{bail, Context, Result};
+use anyhow::{bail, Result};
 use clap::Parser;
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -25,18 +25,7 @@ struct Args {
 }
 
 fn dualgeo() -> Result<PathBuf> {
-    let exe = std::env::current_exe()?;
-    let path = exe
-        .parent()
-        .context("bench binary has no folder")?
-        .join("dualgeo");
-    if !path.is_file() {
-        bail!(
-            "{} not found: run `cargo build --release --workspace` first",
-            path.display()
-        );
-    }
-    Ok(path)
+    dualgeo_bench::dualgeo_binary()
 }
 
 fn run(args: &[&str]) -> Result<()> {

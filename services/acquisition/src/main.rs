@@ -285,7 +285,6 @@ fn main() -> Result<()> {
         Rate::Max => Some(endpoint.listener(Stage::Acquisition)?),
         _ => None,
     };
-    let mut acknowledged = 0u64;
     let mut stats = StageStats::new("acquisition");
     let state_path = args.service.state_file("acquisition.ckpt");
     let resumed = match (&state_path, args.service.incarnation) {
@@ -300,6 +299,8 @@ fn main() -> Result<()> {
         _ => None,
     };
     let mut position = resumed.unwrap_or_default();
+    // `--rate max`: a resumed stream has nothing in flight.
+    let mut acknowledged = position.next_seq;
     if let Some(p) = resumed {
         let t0 = monotonic_ns();
         source.skip(p.consumed);

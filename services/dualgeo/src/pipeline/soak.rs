@@ -6,7 +6,8 @@
 //! end `soak.png` plots them and the run states whether memory and p99 stayed flat:
 //!
 //! - memory: every process's RSS within ±1 % of its first sample after the warm-up
-//!   (`--soak-warm-up-s`, default 60 s: the rings, caches and pools fill first);
+//!   (`--soak-warm-up-s`, default 60 s: the rings, caches and pools fill first; the
+//!   sample taken at the end of the warm-up covers it and is left out too);
 //! - latency: every interval's end-to-end p99 after the warm-up within ±20 % of the
 //!   first such interval's.
 
@@ -65,14 +66,44 @@ fn proc_figures(pid: u32) -> (u64, u64) {
     (rss, fds)
 }
 
+/// What a sample keeps of the stages' cumulative statistics: the [`LATENCIES`]
+/// histograms and the frames dropped so far.
+#[derive(Default)]
+struct Cumulative {
+    latencies: [Option<Histogram<u64>>; 4],
+    dropped: u64,
+}
+
+impl Cumulative {
+    fn load(stats_dir: &Path) -> Self {
+        let mut stages = BTreeMap::new();
+        for stage in super::children::SERVICES {
+            // A file being replaced is read at the next sample.
+            if let Ok(Some(s)) = StageStats::load_stage(stats_dir, stage) {
+                stages.insert(stage, s);
+            }
+        }
+        let mut latencies: [Option<Histogram<u64>>; 4] = Default::default();
+        for (slot, (stage, name)) in latencies.iter_mut().zip(LATENCIES) {
+            *slot = stages
+                .get_mut(stage)
+                .and_then(|s| s.histograms.remove(name));
+        }
+        let dropped = frames_dropped_of(|stage, c| stages.get(stage).map_or(0, |s| s.counter(c)));
+        Self { latencies, dropped }
+    }
+}
+
 pub struct Sampler {
     every: Duration,
     next: Instant,
     start: Instant,
     stats_dir: PathBuf,
     csv: csv::Writer<File>,
-    /// Each stage's cumulative statistics at the previous sample.
-    prev: BTreeMap<String, StageStats>,
+    /// The cumulative figures at the previous sample: only what the report uses (the
+    /// stages' full statistics are parsed and dropped), so the sampler's own memory is
+    /// the same at every sample.
+    prev: Cumulative,
     pub samples: Vec<Sample>,
 }
 
@@ -97,7 +128,10 @@ impl Sampler {
             start: Instant::now(),
             stats_dir: stats_dir.to_path_buf(),
             csv,
-            prev: BTreeMap::new(),
+            // Taken now, so every sample holds the same: the first interval is the
+            // difference from the start, and the sampler's own memory does not grow
+            // between the first sample and the second.
+            prev: Cumulative::load(stats_dir),
             samples: Vec::new(),
         })
     }
@@ -117,38 +151,30 @@ impl Sampler {
             };
             (rss_kib[i], fds[i]) = pid.map_or((0, 0), proc_figures);
         }
-        let mut now = BTreeMap::new();
-        for stage in super::children::SERVICES {
-            // A file being replaced is read at the next sample.
-            if let Ok(Some(s)) = StageStats::load_stage(&self.stats_dir, stage) {
-                now.insert(stage.to_string(), s);
-            }
-        }
-        let interval = |stage: &str, name: &str| -> Option<Histogram<u64>> {
-            let mut h = now.get(stage)?.histograms.get(name)?.clone();
-            if let Some(p) = self.prev.get(stage).and_then(|p| p.histograms.get(name)) {
-                h.subtract(p).ok()?;
-            }
-            Some(h)
-        };
+        let now = Cumulative::load(&self.stats_dir);
         let mut p50_us = [0; 4];
         let mut p99_us = [0; 4];
-        for (i, (stage, name)) in LATENCIES.iter().enumerate() {
-            if let Some(h) = interval(stage, name).filter(|h| !h.is_empty()) {
+        for i in 0..LATENCIES.len() {
+            let Some(mut h) = now.latencies[i].clone() else {
+                continue;
+            };
+            if let Some(p) = &self.prev.latencies[i] {
+                if h.subtract(p).is_err() {
+                    continue;
+                }
+            }
+            if !h.is_empty() {
                 p50_us[i] = h.value_at_quantile(0.5);
                 p99_us[i] = h.value_at_quantile(0.99);
             }
         }
-        let dropped_now = frames_dropped_of(|stage, c| now.get(stage).map_or(0, |s| s.counter(c)));
-        let dropped_before =
-            frames_dropped_of(|stage, c| self.prev.get(stage).map_or(0, |s| s.counter(c)));
         let sample = Sample {
             t_s: self.start.elapsed().as_secs_f64(),
             rss_kib,
             fds,
             p50_us,
             p99_us,
-            dropped: dropped_now.saturating_sub(dropped_before),
+            dropped: now.dropped.saturating_sub(self.prev.dropped),
             restarts,
         };
         let mut row = vec![format!("{:.1}", sample.t_s)];
@@ -163,6 +189,11 @@ impl Sampler {
         self.csv.flush()?;
         self.samples.push(sample);
         self.prev = now;
+        // The sample parsed a few MB of statistics and dropped them: hand the freed
+        // pages back, so the supervisor's RSS reads the same after every sample
+        // (without it, ±1 MB from one sample to the next).
+        // SAFETY: malloc_trim only releases free memory of glibc's heaps.
+        unsafe { libc::malloc_trim(0) };
         Ok(())
     }
 }
@@ -183,7 +214,9 @@ pub fn drift(values: impl IntoIterator<Item = u64>) -> Option<f64> {
 /// One line per criterion: whether memory and p99 stayed flat after `warm_up_s`.
 pub fn verdict(all: &[Sample], warm_up_s: f64) -> Vec<String> {
     let mut lines = Vec::new();
-    let start = all.partition_point(|s| s.t_s < warm_up_s - 1e-6);
+    // A sample covers the interval before it: the one taken at the end of the warm-up
+    // still holds the warm-up.
+    let start = all.partition_point(|s| s.t_s <= warm_up_s + 1e-6);
     let samples = &all[start..];
     if samples.len() < 2 {
         lines.push(format!(
