@@ -21,19 +21,8 @@ fn services_killed_at_random_moments_are_restarted_and_the_track_goes_on() {
     let dir = Scratch::new("chaos");
     let rec = dir.0.join("rec");
     let out = dir.0.join("out");
-    let o = Command::new(env!("CARGO_BIN_EXE_dualgeo"))
-        .args([
-            "simulate",
-            "--preset",
-            "default",
-            "--duration-s",
-            "6",
-            "--out",
-        ])
-        .arg(&rec)
-        .output()
-        .expect("spawn dualgeo simulate");
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let dualgeo = std::path::Path::new(env!("CARGO_BIN_EXE_dualgeo"));
+    chaos::simulate_default(dualgeo, 6, &rec).unwrap();
 
     let run = Command::new(env!("CARGO_BIN_EXE_dualgeo"))
         .args(["run", "--loop", "--run-for-s", "32", "--source"])

@@ -79,6 +79,27 @@ pub fn wait_all_running(parent: u32, timeout: Duration) -> bool {
     false
 }
 
+/// `dualgeo simulate --preset default --duration-s SECONDS --out OUT`: the recording a
+/// looped run replays.
+pub fn simulate_default(dualgeo: &Path, seconds: u32, out: &Path) -> Result<(), String> {
+    let o = std::process::Command::new(dualgeo)
+        .args(["simulate", "--preset", "default", "--duration-s"])
+        .arg(seconds.to_string())
+        .arg("--out")
+        .arg(out)
+        .output()
+        .map_err(|e| format!("spawn {}: {e}", dualgeo.display()))?;
+    if o.status.success() {
+        Ok(())
+    } else {
+        Err(format!(
+            "dualgeo simulate failed ({}): {}",
+            o.status,
+            String::from_utf8_lossy(&o.stderr)
+        ))
+    }
+}
+
 /// One SIGKILL sent.
 #[derive(Debug, Clone)]
 pub struct Kill {

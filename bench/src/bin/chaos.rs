@@ -53,20 +53,7 @@ fn main() -> Result<()> {
         "sim" => "sim".to_string(),
         "recording" => {
             let rec = scratch.join("rec");
-            let status = Command::new(dualgeo()?)
-                .args([
-                    "simulate",
-                    "--preset",
-                    "default",
-                    "--duration-s",
-                    "6",
-                    "--out",
-                ])
-                .arg(&rec)
-                .status()?;
-            if !status.success() {
-                bail!("dualgeo simulate failed: {status}");
-            }
+            chaos::simulate_default(&dualgeo()?, 6, &rec).map_err(anyhow::Error::msg)?;
             rec.display().to_string()
         }
         other => bail!("--source must be recording or sim, got {other:?}"),

@@ -260,14 +260,15 @@ impl ColourBlobDetector {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
 
     fn draw_rect(m: &mut cv::Mat, rect: cv::Rect, colour: cv::Scalar) {
         opencv::imgproc::rectangle(m, rect, colour, -1, opencv::imgproc::LINE_8, 0).unwrap();
     }
 
-    fn frame_with_rect(x: i32, y: i32, w: i32, h: i32, bgr: [f64; 3]) -> cv::Mat {
+    /// A 160×120 grey-green frame with one filled rectangle (also the track tests').
+    pub(crate) fn frame_with_rect(x: i32, y: i32, w: i32, h: i32, bgr: [f64; 3]) -> cv::Mat {
         let mut m = cv::Mat::new_rows_cols_with_default(
             120,
             160,

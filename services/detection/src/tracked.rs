@@ -72,17 +72,7 @@ mod tests {
     use super::*;
 
     fn frame_with_red(x: i32, w: i32) -> cv::Mat {
-        let mut m = cv::Mat::new_rows_cols_with_default(
-            120,
-            160,
-            cv::CV_8UC3,
-            cv::Scalar::new(90.0, 110.0, 95.0, 0.0),
-        )
-        .unwrap();
-        let red = cv::Scalar::new(36.0, 28.0, 214.0, 0.0);
-        let rect = cv::Rect::new(x, 50, w, 9);
-        opencv::imgproc::rectangle(&mut m, rect, red, -1, opencv::imgproc::LINE_8, 0).unwrap();
-        m
+        crate::colour_blob::tests::frame_with_rect(x, 50, w, 9, [36.0, 28.0, 214.0])
     }
 
     #[test]

@@ -39,9 +39,8 @@ pub struct Collector {
 
 /// What a run produced.
 pub struct Collected {
-    /// Estimate messages received (valid or not) and valid ones written to track.csv.
+    /// Estimate messages received (valid or not).
     pub messages: u64,
-    pub valid: u64,
     /// The supervisor's own histograms (`transport` of the estimates hop).
     pub stats: StageStats,
     /// CLOCK_MONOTONIC when acquisition was started and when the stream ended.
@@ -135,7 +134,6 @@ impl Collector {
         let progress = Progress::new();
         let mut c = Collected {
             messages: 0,
-            valid: 0,
             stats: StageStats::new("supervisor"),
             start_ns: monotonic_ns(),
             end_ns: 0,
@@ -173,14 +171,13 @@ impl Collector {
                         c.messages += 1;
                         if admissible(&msg, last_t_s, &mut c.stats) {
                             last_t_s = Some(msg.t_s);
-                            c.valid += (msg.status == EstimateStatus::Ok as u32) as u64;
                             track.push(&msg)?;
                         }
                     }
                 }
                 c.supervision.watch(services)?;
                 if id.has_event_from(&tick) {
-                    progress.update(c.valid, c.messages, c.start_ns);
+                    progress.update(track.rows, c.messages, c.start_ns);
                     let restarts = c.supervision.restarts.len() as u64;
                     c.sampler.tick(services, restarts)?;
                 }
@@ -213,7 +210,7 @@ impl Collector {
                 }
             }
         });
-        progress.finish(c.valid, c.start_ns);
+        progress.finish(track.rows, c.start_ns);
         track.flush()?;
         if let Some(e) = failure {
             return Err(e);

@@ -8,6 +8,7 @@
 use crate::plot_font::font_available;
 use anyhow::{anyhow, Result};
 use hdrhistogram::Histogram;
+use plotters::coord::types::RangedCoordf64;
 use plotters::prelude::*;
 use std::path::Path;
 
@@ -21,6 +22,40 @@ pub const COLOURS: [RGBColor; 5] = [
 
 fn err<E: std::fmt::Debug>(e: E) -> anyhow::Error {
     anyhow!("plot: {e:?}")
+}
+
+/// A chart over two f64 axes on a PNG.
+type Chart<'a, 'b> =
+    ChartContext<'a, BitMapBackend<'b>, Cartesian2d<RangedCoordf64, RangedCoordf64>>;
+
+/// One line in `colour`, named in the legend when text can be drawn.
+fn labelled_line<'a>(
+    chart: &mut Chart<'a, 'a>,
+    points: Vec<(f64, f64)>,
+    colour: RGBColor,
+    name: String,
+    text: bool,
+) -> Result<()> {
+    let series = chart
+        .draw_series(LineSeries::new(points, colour.stroke_width(2)))
+        .map_err(err)?;
+    if text {
+        series.label(name).legend(move |(x, y)| {
+            PathElement::new(vec![(x, y), (x + 20, y)], colour.stroke_width(2))
+        });
+    }
+    Ok(())
+}
+
+/// The legend box of every plot here.
+fn legend<'a>(chart: &mut Chart<'a, 'a>, position: SeriesLabelPosition) -> Result<()> {
+    chart
+        .configure_series_labels()
+        .background_style(WHITE.mix(0.8))
+        .border_style(BLACK)
+        .position(position)
+        .draw()
+        .map_err(err)
 }
 
 /// Latency (ms) against percentile, one line per row, like HdrHistogram's plotter.
@@ -71,23 +106,10 @@ pub fn latency_percentiles(path: &Path, rows: &[(String, Histogram<u64>)]) -> Re
                 })
             })
             .collect();
-        let series = chart
-            .draw_series(LineSeries::new(points, colour.stroke_width(2)))
-            .map_err(err)?;
-        if text {
-            series.label(name.clone()).legend(move |(x, y)| {
-                PathElement::new(vec![(x, y), (x + 20, y)], colour.stroke_width(2))
-            });
-        }
+        labelled_line(&mut chart, points, colour, name.clone(), text)?;
     }
     if text {
-        chart
-            .configure_series_labels()
-            .background_style(WHITE.mix(0.8))
-            .border_style(BLACK)
-            .position(SeriesLabelPosition::UpperLeft)
-            .draw()
-            .map_err(err)?;
+        legend(&mut chart, SeriesLabelPosition::UpperLeft)?;
     }
     root.present().map_err(err)?;
     Ok(())
@@ -241,23 +263,10 @@ pub fn soak(path: &Path, samples: &[super::soak::Sample]) -> Result<()> {
         mesh.draw().map_err(err)?;
         for (i, (name, pts)) in series.into_iter().enumerate() {
             let colour = COLOURS[i % COLOURS.len()];
-            let s = chart
-                .draw_series(LineSeries::new(pts, colour.stroke_width(2)))
-                .map_err(err)?;
-            if text {
-                s.label(name).legend(move |(x, y)| {
-                    PathElement::new(vec![(x, y), (x + 20, y)], colour.stroke_width(2))
-                });
-            }
+            labelled_line(&mut chart, pts, colour, name, text)?;
         }
         if text {
-            chart
-                .configure_series_labels()
-                .background_style(WHITE.mix(0.8))
-                .border_style(BLACK)
-                .position(SeriesLabelPosition::LowerRight)
-                .draw()
-                .map_err(err)?;
+            legend(&mut chart, SeriesLabelPosition::LowerRight)?;
         }
     }
     root.present().map_err(err)?;
