@@ -219,6 +219,24 @@ pub struct EstimateMsg {
 }
 
 /// Why an [`EstimateMsg`] carries no estimate.
+impl EstimateMsg {
+    /// Why an estimate may not be written out after one at `last_t_s`: `out_of_order`
+    /// (not newer) or `non_finite` (an `Ok` status with a non-finite time, position or
+    /// bias). `None`: it may. The supervisor's guard on what it reads.
+    pub fn refusal(&self, last_t_s: Option<f64>) -> Option<&'static str> {
+        if last_t_s.is_some_and(|t| self.t_s.partial_cmp(&t) != Some(std::cmp::Ordering::Greater)) {
+            return Some("out_of_order");
+        }
+        let finite = self.t_s.is_finite()
+            && self
+                .position
+                .iter()
+                .chain(&self.yaw_bias_deg)
+                .all(|v| v.is_finite());
+        (self.status == EstimateStatus::Ok as u32 && !finite).then_some("non_finite")
+    }
+}
+
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 #[repr(u32)]
 pub enum EstimateStatus {
@@ -263,6 +281,33 @@ mod tests {
             ..Default::default()
         };
         assert_eq!(set.entries().len(), MAX_OBSERVATIONS);
+    }
+
+    #[test]
+    fn the_supervisor_refuses_late_and_non_finite_estimates() {
+        let ok = EstimateMsg {
+            t_s: 2.0,
+            ..Default::default()
+        };
+        assert_eq!(ok.refusal(None), None);
+        assert_eq!(ok.refusal(Some(1.0)), None);
+        assert_eq!(ok.refusal(Some(2.0)), Some("out_of_order"));
+        let nan_time = EstimateMsg {
+            t_s: f64::NAN,
+            ..ok
+        };
+        assert_eq!(nan_time.refusal(Some(1.0)), Some("out_of_order"));
+        assert_eq!(nan_time.refusal(None), Some("non_finite"));
+        let nan_position = EstimateMsg {
+            position: [0.0, f64::NAN, 0.0],
+            ..ok
+        };
+        assert_eq!(nan_position.refusal(None), Some("non_finite"));
+        let rejected = EstimateMsg {
+            status: EstimateStatus::Rejected as u32,
+            ..nan_position
+        };
+        assert_eq!(rejected.refusal(None), None);
     }
 
     #[test]

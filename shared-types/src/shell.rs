@@ -114,13 +114,21 @@ pub fn load_section<T: DeserializeOwned + Default>(
         detail,
     };
     let text = std::fs::read_to_string(path).map_err(|e| err(e.to_string()))?;
-    let table: toml::Table = toml::from_str(&text).map_err(|e| err(e.to_string()))?;
+    parse_section(&text, section).map_err(err)
+}
+
+/// Section `section` of a TOML document, `T::default()` when it has none.
+pub fn parse_section<T: DeserializeOwned + Default>(
+    text: &str,
+    section: &str,
+) -> Result<T, String> {
+    let table: toml::Table = toml::from_str(text).map_err(|e| e.to_string())?;
     match table.get(section) {
         None => Ok(T::default()),
         Some(value) => value
             .clone()
             .try_into()
-            .map_err(|e| err(format!("[{section}]: {e}"))),
+            .map_err(|e| format!("[{section}]: {e}")),
     }
 }
 

@@ -35,18 +35,28 @@ impl StreamPosition {
     /// The saved position, `None` on a first start; refused when a value is not finite.
     pub fn load(path: &Path) -> Result<Option<Self>, CheckpointError> {
         let p: Option<Self> = checkpoint::read(path, KIND)?;
-        match p {
-            Some(p)
-                if !(p.t_offset.is_finite()
-                    && p.last_t.is_finite()
-                    && p.t_first.is_none_or(f64::is_finite)) =>
-            {
-                Err(CheckpointError::Format {
-                    path: path.to_path_buf(),
-                    detail: "a stream time is not finite".into(),
-                })
-            }
-            p => Ok(p),
+        p.map(|p| {
+            p.checked().map_err(|detail| CheckpointError::Format {
+                path: path.to_path_buf(),
+                detail,
+            })
+        })
+        .transpose()
+    }
+
+    /// A checkpoint file's bytes decoded and checked (what `load` does after reading).
+    pub fn decode(bytes: &[u8]) -> Result<Self, String> {
+        checkpoint::decode::<Self>(KIND, bytes)?.checked()
+    }
+
+    fn checked(self) -> Result<Self, String> {
+        if self.t_offset.is_finite()
+            && self.last_t.is_finite()
+            && self.t_first.is_none_or(f64::is_finite)
+        {
+            Ok(self)
+        } else {
+            Err("a stream time is not finite".into())
         }
     }
 }

@@ -28,6 +28,7 @@ pub mod joint;
 pub mod observation;
 pub mod one_shot;
 pub mod regression;
+pub mod set_message;
 pub mod synthetic;
 pub mod temporal;
 pub mod temporal_snapshot;

@@ -18,14 +18,11 @@
 
 use anyhow::{Context, Result};
 use clap::Parser;
-use geolocation::{
-    estimate_set, EstimatorConfig, EstimatorMethod, ImageId, Observation, TemporalEstimator,
-    TemporalSnapshot,
-};
-use serde::{Deserialize, Serialize};
+use geolocation::set_message::{estimate_message, is_stale, Resume, CHECKPOINT_KIND};
+use geolocation::{EstimatorConfig, EstimatorMethod, TemporalEstimator};
 use shared_types::checkpoint;
 use shared_types::clock::{elapsed_us, monotonic_ns};
-use shared_types::messages::{EstimateMsg, EstimateStatus, ObservationSetMsg};
+use shared_types::messages::{EstimateMsg, ObservationSetMsg};
 use shared_types::service_names::Topic;
 use shared_types::shell::{init_tracing, load_section, serve, SeqGaps, ServiceArgs, StatsSaver};
 use shared_types::stats::StageStats;
@@ -36,19 +33,6 @@ use shared_types::transport::{Endpoint, Stage};
 struct Args {
     #[command(flatten)]
     service: ServiceArgs,
-}
-
-/// The checkpoint's kind tag (`shared_types::checkpoint`).
-const CHECKPOINT_KIND: u32 = 2;
-
-/// What a restarted geolocation service resumes from.
-#[derive(Serialize, Deserialize)]
-struct Resume {
-    /// Pair and stream time of the last estimate published.
-    last_pair_seq: u64,
-    last_t_s: f64,
-    /// The temporal filter (`None` for the per-window methods, which keep no state).
-    filter: Option<TemporalSnapshot>,
 }
 
 /// The checkpoint left by a previous incarnation, if there is one to trust.
@@ -82,95 +66,6 @@ fn resume(
         "resumed from the checkpoint"
     );
     Some((found.last_pair_seq, found.last_t_s))
-}
-
-/// No NaN leaves this service: an estimate with a non-finite value is a rejection.
-fn finite(msg: &EstimateMsg) -> bool {
-    msg.position
-        .iter()
-        .chain(&msg.yaw_bias_deg)
-        .chain(&msg.covariance)
-        .all(|v| v.is_finite())
-        && msg.altitude_std_error_m.is_finite()
-}
-
-/// The estimate of one observation set, or why there is none.
-fn estimate(
-    set: &ObservationSetMsg,
-    config: &EstimatorConfig,
-    temporal: Option<&mut TemporalEstimator>,
-    stats: &mut StageStats,
-) -> EstimateMsg {
-    let mut msg = EstimateMsg {
-        pair_seq: set.pair_seq,
-        capture_ns: set.capture_ns,
-        t_s: set.t_s,
-        ..Default::default()
-    };
-    let observations: Result<Vec<Observation>, _> = set
-        .entries()
-        .iter()
-        .enumerate()
-        .map(|(i, e)| Observation::from_entry(e, i))
-        .collect();
-    let observations = match observations {
-        Ok(o) if o.len() >= 2 && set.count as usize == o.len() => o,
-        Ok(_) => {
-            stats.count("bad_input", 1);
-            tracing::warn!(
-                pair = set.pair_seq,
-                count = set.count,
-                "observation set count is invalid"
-            );
-            msg.status = EstimateStatus::BadInput as u32;
-            return msg;
-        }
-        Err(e) => {
-            stats.count("bad_input", 1);
-            tracing::warn!(pair = set.pair_seq, "observation set rejected: {e}");
-            msg.status = EstimateStatus::BadInput as u32;
-            return msg;
-        }
-    };
-    let past: Vec<(ImageId, Observation)> = set.entries()[2..]
-        .iter()
-        .zip(&observations[2..])
-        .map(|(entry, o)| ((o.uav, entry.frame_seq), *o))
-        .collect();
-    let current = [&observations[0], &observations[1]];
-    let result = estimate_set(set.t_s, current, &past, config, temporal).map(|e| {
-        if e.reopened {
-            stats.count("temporal_reopened", 1);
-            tracing::info!(
-                pair = set.pair_seq,
-                "bias step suspected: covariance re-opened"
-            );
-        }
-        if e.velocity.is_some() {
-            stats.count("temporal_rays_rejected", e.rays_rejected as u64);
-        }
-        e.estimate
-    });
-    match result {
-        Ok(e) => {
-            stats.count("estimates", 1);
-            msg.position = [e.position.x, e.position.y, e.position.z];
-            msg.yaw_bias_deg = [e.yaw_bias[0].to_degrees(), e.yaw_bias[1].to_degrees()];
-            for (i, v) in e.covariance.transpose().iter().enumerate() {
-                msg.covariance[i] = *v;
-            }
-            msg.altitude_std_error_m = e.altitude_std_error_m;
-            msg.images_used = e.images_used as u32;
-            msg.iterations = e.iterations as u32;
-            msg.converged = e.converged as u32;
-        }
-        Err(e) => {
-            stats.count(&format!("rejected.{}", e.kind()), 1);
-            tracing::debug!(pair = set.pair_seq, "no estimate: {e}");
-            msg.status = EstimateStatus::Rejected as u32;
-        }
-    }
-    msg
 }
 
 fn main() -> Result<()> {
@@ -208,16 +103,12 @@ fn main() -> Result<()> {
             stats.record("wait", elapsed_us(set.published_ns, start));
             stats.count("sets", 1);
             stats.count("sets_lost", gaps.see(set.set_seq));
-            if matches!(last, Some((_, t)) if set.t_s <= t) {
+            if is_stale(set.t_s, last.map(|(_, t)| t)) {
                 stats.count("stale_sets", 1);
                 continue;
             }
-            let mut msg = estimate(set, &config, temporal.as_mut(), &mut stats);
+            let mut msg = estimate_message(set, &config, temporal.as_mut(), &mut stats);
             drop(sample);
-            if msg.status == EstimateStatus::Ok as u32 && !finite(&msg) {
-                stats.count("rejected.non_finite", 1);
-                msg.status = EstimateStatus::Rejected as u32;
-            }
             let done = monotonic_ns();
             stats.record("compute", elapsed_us(start, done));
             msg.published_ns = monotonic_ns();

@@ -14,6 +14,7 @@ pub mod features;
 pub mod grid;
 pub mod ground_plane;
 pub mod hamming;
+pub mod intake;
 pub mod ring;
 pub mod ring_snapshot;
 pub mod ring_store;

@@ -12,8 +12,8 @@ use shared_types::conventions::Uav;
 use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};
 
-const KEYFRAME_KIND: u32 = 3;
-const INDEX_KIND: u32 = 4;
+pub const KEYFRAME_KIND: u32 = 3;
+pub const INDEX_KIND: u32 = 4;
 
 pub struct RingStore {
     dir: PathBuf,

@@ -1,13 +1,15 @@
 //! Reading one image of a recording: PNG or JPEG, 8-bit grey or BGR, of the size
 //! recording.toml gives. Truncated files are caught by their missing end marker
-//! (libjpeg would otherwise pad a truncated JPEG with grey and call it a success).
+//! (libjpeg would otherwise pad a truncated JPEG with grey and call it a success), and a
+//! header declaring another size is refused before the decoder allocates anything
+//! ([`super::image_header`]).
 
 use super::RecordingError;
 use opencv::core as cv;
 use opencv::prelude::*;
 use std::path::Path;
 
-const PNG_SIGNATURE: [u8; 8] = [0x89, b'P', b'N', b'G', 0x0d, 0x0a, 0x1a, 0x0a];
+pub(super) const PNG_SIGNATURE: [u8; 8] = [0x89, b'P', b'N', b'G', 0x0d, 0x0a, 0x1a, 0x0a];
 const PNG_IEND: [u8; 12] = [0, 0, 0, 0, b'I', b'E', b'N', b'D', 0xae, 0x42, 0x60, 0x82];
 
 fn unreadable(path: &Path, reason: impl Into<String>) -> RecordingError {
@@ -17,8 +19,30 @@ fn unreadable(path: &Path, reason: impl Into<String>) -> RecordingError {
     }
 }
 
+/// Checks the container's start and end markers and the size its header declares.
+fn check_container(
+    path: &Path,
+    bytes: &[u8],
+    width: u32,
+    height: u32,
+) -> Result<(), RecordingError> {
+    check_markers(path, bytes)?;
+    let (got_width, got_height) =
+        super::image_header::declared_size(bytes).map_err(|e| unreadable(path, e))?;
+    if (got_width, got_height) != (width, height) {
+        return Err(RecordingError::ImageSize {
+            path: path.into(),
+            want_width: width,
+            want_height: height,
+            got_width,
+            got_height,
+        });
+    }
+    Ok(())
+}
+
 /// Checks the container's start and end markers.
-fn check_container(path: &Path, bytes: &[u8]) -> Result<(), RecordingError> {
+fn check_markers(path: &Path, bytes: &[u8]) -> Result<(), RecordingError> {
     if bytes.starts_with(&PNG_SIGNATURE) {
         if !bytes.ends_with(&PNG_IEND) {
             return Err(unreadable(path, "truncated PNG (no IEND chunk at the end)"));
@@ -56,14 +80,11 @@ fn check_size(
     Ok(())
 }
 
-/// The file's bytes, after checking its container's start and end markers.
-fn read_checked(path: &Path) -> Result<Vec<u8>, RecordingError> {
-    let bytes = std::fs::read(path).map_err(|e| match e.kind() {
+fn read_file(path: &Path) -> Result<Vec<u8>, RecordingError> {
+    std::fs::read(path).map_err(|e| match e.kind() {
         std::io::ErrorKind::NotFound => RecordingError::MissingFile { path: path.into() },
         _ => RecordingError::io(path, e),
-    })?;
-    check_container(path, &bytes)?;
-    Ok(bytes)
+    })
 }
 
 /// Reads and decodes an image file as 8-bit BGR straight into `dst` (packed rows,
@@ -75,7 +96,18 @@ pub fn decode_image_into(
     height: u32,
     dst: &mut [u8],
 ) -> Result<(), RecordingError> {
-    let bytes = read_checked(path)?;
+    decode_bytes_into(&read_file(path)?, path, width, height, dst)
+}
+
+/// [`decode_image_into`] of a file's bytes already in memory (errors name `path`).
+pub fn decode_bytes_into(
+    bytes: &[u8],
+    path: &Path,
+    width: u32,
+    height: u32,
+    dst: &mut [u8],
+) -> Result<(), RecordingError> {
+    check_container(path, bytes, width, height)?;
     let expected = width as usize * height as usize * 3;
     if dst.len() != expected {
         return Err(unreadable(
@@ -90,7 +122,7 @@ pub fn decode_image_into(
     let mut mat =
         cv::Mat::new_rows_cols_with_bytes_mut::<cv::Vec3b>(height as i32, width as i32, dst)
             .map_err(|e| unreadable(path, e.message))?;
-    let buf = cv::Vector::<u8>::from_slice(&bytes);
+    let buf = cv::Vector::<u8>::from_slice(bytes);
     opencv::imgcodecs::imdecode_to(&buf, opencv::imgcodecs::IMREAD_COLOR, &mut mat)
         .map_err(|e| unreadable(path, e.message))?;
     if mat.empty() {
@@ -113,7 +145,8 @@ pub fn decode_image_into(
 
 /// Reads and decodes an image file, checking format, depth, channels and size.
 pub fn decode_image(path: &Path, width: u32, height: u32) -> Result<cv::Mat, RecordingError> {
-    let bytes = read_checked(path)?;
+    let bytes = read_file(path)?;
+    check_container(path, &bytes, width, height)?;
     let buf = cv::Vector::<u8>::from_slice(&bytes);
     let mat = opencv::imgcodecs::imdecode(&buf, opencv::imgcodecs::IMREAD_UNCHANGED)
         .map_err(|e| unreadable(path, e.message))?;

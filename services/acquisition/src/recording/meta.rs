@@ -99,7 +99,12 @@ impl RecordingMeta {
             std::io::ErrorKind::NotFound => RecordingError::MissingFile { path: path.into() },
             _ => RecordingError::io(path, e),
         })?;
-        let meta: RecordingMeta = toml::from_str(&text).map_err(|e| RecordingError::Metadata {
+        Self::parse(&text, path)
+    }
+
+    /// Parses and validates recording.toml's text (errors name `path`).
+    pub fn parse(text: &str, path: &Path) -> Result<Self, RecordingError> {
+        let meta: RecordingMeta = toml::from_str(text).map_err(|e| RecordingError::Metadata {
             path: path.into(),
             message: e.to_string().trim_end().to_string(),
         })?;

@@ -3,6 +3,7 @@
 
 mod error;
 mod image_file;
+mod image_header;
 mod meta;
 mod reader;
 mod rows;
@@ -10,11 +11,13 @@ mod stream_log;
 mod writer;
 
 pub use error::{CsvPlace, RecordingError};
-pub use image_file::{decode_image, decode_image_into};
+pub use image_file::{decode_bytes_into, decode_image, decode_image_into};
+pub use image_header::declared_size;
 pub use meta::{CameraMeta, Origin, RecordingMeta, UavMeta, UavPair, FORMAT_NAME, FORMAT_VERSION};
 pub use reader::{Recording, StereoPair};
 pub use rows::{
-    read_telemetry, read_truth, TelemetryRow, TruthRow, TELEMETRY_HEADER, TRUTH_HEADER,
+    parse_telemetry, parse_truth, read_telemetry, read_truth, TelemetryRow, TruthRow,
+    TELEMETRY_HEADER, TRUTH_HEADER,
 };
 pub use stream_log::StreamLog;
 pub use writer::{RecordingWriter, TruthSample};

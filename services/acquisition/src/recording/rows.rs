@@ -6,6 +6,7 @@ use super::error::CsvPlace;
 use super::RecordingError;
 use shared_types::conventions::Uav;
 use shared_types::messages::PoseSample;
+use std::io::Read;
 use std::path::Path;
 
 pub const TELEMETRY_HEADER: [&str; 10] = [
@@ -146,20 +147,26 @@ impl Fields<'_> {
     }
 }
 
-/// Opens a CSV file, checks its header and hands each data row to `row` with its line.
-fn read_csv<T>(
-    path: &Path,
-    header: &'static [&'static str],
-    mut row: impl FnMut(&Fields) -> Result<T, RecordingError>,
-) -> Result<Vec<T>, RecordingError> {
+fn open_csv(path: &Path) -> Result<std::io::BufReader<std::fs::File>, RecordingError> {
     let file = std::fs::File::open(path).map_err(|e| match e.kind() {
         std::io::ErrorKind::NotFound => RecordingError::MissingFile { path: path.into() },
         _ => RecordingError::io(path, e),
     })?;
+    Ok(std::io::BufReader::new(file))
+}
+
+/// Reads CSV from `input` (errors name `path`), checks its header and hands each data
+/// row to `row` with its line.
+fn parse_csv<T>(
+    input: impl Read,
+    path: &Path,
+    header: &'static [&'static str],
+    mut row: impl FnMut(&Fields) -> Result<T, RecordingError>,
+) -> Result<Vec<T>, RecordingError> {
     let mut reader = csv::ReaderBuilder::new()
         .has_headers(false)
         .flexible(true)
-        .from_reader(std::io::BufReader::new(file));
+        .from_reader(input);
     let whole_line = |line: u64, message: String| RecordingError::Csv {
         place: CsvPlace {
             path: path.into(),
@@ -263,8 +270,17 @@ impl Monotonic {
 
 /// Rows of telemetry.csv with their line numbers.
 pub fn read_telemetry(path: &Path) -> Result<Vec<(u64, TelemetryRow)>, RecordingError> {
+    parse_telemetry(open_csv(path)?, path)
+}
+
+/// Rows of telemetry.csv read from `input`, errors naming `path` (the fuzz targets'
+/// entry point: no file needed).
+pub fn parse_telemetry(
+    input: impl Read,
+    path: &Path,
+) -> Result<Vec<(u64, TelemetryRow)>, RecordingError> {
     let mut order = Monotonic::new();
-    read_csv(path, &TELEMETRY_HEADER, |f| {
+    parse_csv(input, path, &TELEMETRY_HEADER, |f| {
         let uav = f.uav(0)?;
         let frame = f.frame(1)?;
         let file = f.text(2).to_string();
@@ -289,8 +305,13 @@ pub fn read_telemetry(path: &Path) -> Result<Vec<(u64, TelemetryRow)>, Recording
 
 /// Rows of truth.csv with their line numbers.
 pub fn read_truth(path: &Path) -> Result<Vec<(u64, TruthRow)>, RecordingError> {
+    parse_truth(open_csv(path)?, path)
+}
+
+/// Rows of truth.csv read from `input`, errors naming `path`.
+pub fn parse_truth(input: impl Read, path: &Path) -> Result<Vec<(u64, TruthRow)>, RecordingError> {
     let mut order = Monotonic::new();
-    read_csv(path, &TRUTH_HEADER, |f| {
+    parse_csv(input, path, &TRUTH_HEADER, |f| {
         let uav = f.uav(0)?;
         let frame = f.frame(1)?;
         let t_s = f.number(2)?;

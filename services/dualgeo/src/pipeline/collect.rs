@@ -18,7 +18,7 @@ use iceoryx2::waitset::WaitSetRunResult;
 use indicatif::{ProgressBar, ProgressStyle};
 use shared_types::clock::{elapsed_us, monotonic_ns};
 use shared_types::conventions::Uav;
-use shared_types::messages::{DetectionMsg, EstimateMsg, EstimateStatus, ObservationSetMsg};
+use shared_types::messages::{DetectionMsg, EstimateMsg, ObservationSetMsg};
 use shared_types::service_names::Topic;
 use shared_types::stats::StageStats;
 use shared_types::transport::{Endpoint, Ipc, MsgSubscriber, Stage, END_OF_STREAM_EVENT};
@@ -54,23 +54,15 @@ pub struct Collected {
     pub sampler: Sampler,
 }
 
-/// Whether an estimate may be written out after `last_t_s`.
+/// Whether an estimate may be written out after `last_t_s` (counted when not).
 fn admissible(msg: &EstimateMsg, last_t_s: Option<f64>, stats: &mut StageStats) -> bool {
-    if last_t_s.is_some_and(|t| msg.t_s.partial_cmp(&t) != Some(std::cmp::Ordering::Greater)) {
-        stats.count("out_of_order", 1);
-        return false;
+    match msg.refusal(last_t_s) {
+        Some(reason) => {
+            stats.count(reason, 1);
+            false
+        }
+        None => true,
     }
-    let finite = msg.t_s.is_finite()
-        && msg
-            .position
-            .iter()
-            .chain(&msg.yaw_bias_deg)
-            .all(|v| v.is_finite());
-    if msg.status == EstimateStatus::Ok as u32 && !finite {
-        stats.count("non_finite", 1);
-        return false;
-    }
-    true
 }
 
 impl Collector {

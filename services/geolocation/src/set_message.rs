@@ -1,0 +1,208 @@
+//! The geolocation service's intake: an [`ObservationSetMsg`] as it arrives from shared
+//! memory in, an [`EstimateMsg`] out. Every field of the message is untrusted (the fuzz
+//! target `observations` feeds it arbitrary bytes): a bad entry, count or value gives a
+//! `BadInput` or `Rejected` status with its counter, never a panic and never a
+//! non-finite estimate.
+
+use crate::TemporalSnapshot;
+use crate::{estimate_set, EstimatorConfig, ImageId, Observation, TemporalEstimator};
+use serde::{Deserialize, Serialize};
+use shared_types::messages::{EstimateMsg, EstimateStatus, ObservationSetMsg};
+use shared_types::stats::StageStats;
+
+/// The kind tag of the service's checkpoint (`shared_types::checkpoint`).
+pub const CHECKPOINT_KIND: u32 = 2;
+
+/// What a restarted geolocation service resumes from (its checkpoint's content).
+#[derive(Debug, Serialize, Deserialize)]
+pub struct Resume {
+    /// Pair and stream time of the last estimate published.
+    pub last_pair_seq: u64,
+    pub last_t_s: f64,
+    /// The temporal filter (`None` for the per-window methods, which keep no state).
+    pub filter: Option<TemporalSnapshot>,
+}
+
+/// Whether a set must be dropped unseen (`stale_sets`): its time is not finite, or not
+/// newer than the last estimate published. Keeps estimates in time order across a
+/// restart, and a NaN time can never become the "last" one and disable the check.
+pub fn is_stale(t_s: f64, last_t_s: Option<f64>) -> bool {
+    !t_s.is_finite() || last_t_s.is_some_and(|t| t_s <= t)
+}
+
+/// No NaN leaves the service: an estimate with a non-finite value is a rejection.
+pub fn finite(msg: &EstimateMsg) -> bool {
+    msg.position
+        .iter()
+        .chain(&msg.yaw_bias_deg)
+        .chain(&msg.covariance)
+        .all(|v| v.is_finite())
+        && msg.altitude_std_error_m.is_finite()
+}
+
+/// The estimate of one observation set, or why there is none (the status, and a
+/// counter in `stats`). A non-finite result is turned into `rejected.non_finite`.
+pub fn estimate_message(
+    set: &ObservationSetMsg,
+    config: &EstimatorConfig,
+    temporal: Option<&mut TemporalEstimator>,
+    stats: &mut StageStats,
+) -> EstimateMsg {
+    let mut msg = estimate_unchecked(set, config, temporal, stats);
+    if msg.status == EstimateStatus::Ok as u32 && !finite(&msg) {
+        stats.count("rejected.non_finite", 1);
+        msg.status = EstimateStatus::Rejected as u32;
+    }
+    msg
+}
+
+fn estimate_unchecked(
+    set: &ObservationSetMsg,
+    config: &EstimatorConfig,
+    temporal: Option<&mut TemporalEstimator>,
+    stats: &mut StageStats,
+) -> EstimateMsg {
+    let mut msg = EstimateMsg {
+        pair_seq: set.pair_seq,
+        capture_ns: set.capture_ns,
+        t_s: set.t_s,
+        ..Default::default()
+    };
+    if !set.t_s.is_finite() {
+        stats.count("bad_input", 1);
+        tracing::warn!(pair = set.pair_seq, "observation set time is not finite");
+        msg.status = EstimateStatus::BadInput as u32;
+        return msg;
+    }
+    let observations: Result<Vec<Observation>, _> = set
+        .entries()
+        .iter()
+        .enumerate()
+        .map(|(i, e)| Observation::from_entry(e, i))
+        .collect();
+    let observations = match observations {
+        Ok(o) if o.len() >= 2 && set.count as usize == o.len() => o,
+        Ok(_) => {
+            stats.count("bad_input", 1);
+            tracing::warn!(
+                pair = set.pair_seq,
+                count = set.count,
+                "observation set count is invalid"
+            );
+            msg.status = EstimateStatus::BadInput as u32;
+            return msg;
+        }
+        Err(e) => {
+            stats.count("bad_input", 1);
+            tracing::warn!(pair = set.pair_seq, "observation set rejected: {e}");
+            msg.status = EstimateStatus::BadInput as u32;
+            return msg;
+        }
+    };
+    let past: Vec<(ImageId, Observation)> = set.entries()[2..]
+        .iter()
+        .zip(&observations[2..])
+        .map(|(entry, o)| ((o.uav, entry.frame_seq), *o))
+        .collect();
+    let current = [&observations[0], &observations[1]];
+    let result = estimate_set(set.t_s, current, &past, config, temporal).map(|e| {
+        if e.reopened {
+            stats.count("temporal_reopened", 1);
+            tracing::info!(
+                pair = set.pair_seq,
+                "bias step suspected: covariance re-opened"
+            );
+        }
+        if e.velocity.is_some() {
+            stats.count("temporal_rays_rejected", e.rays_rejected as u64);
+        }
+        e.estimate
+    });
+    match result {
+        Ok(e) => {
+            stats.count("estimates", 1);
+            msg.position = [e.position.x, e.position.y, e.position.z];
+            msg.yaw_bias_deg = [e.yaw_bias[0].to_degrees(), e.yaw_bias[1].to_degrees()];
+            for (i, v) in e.covariance.transpose().iter().enumerate() {
+                msg.covariance[i] = *v;
+            }
+            msg.altitude_std_error_m = e.altitude_std_error_m;
+            msg.images_used = e.images_used as u32;
+            msg.iterations = e.iterations as u32;
+            msg.converged = e.converged as u32;
+        }
+        Err(e) => {
+            stats.count(&format!("rejected.{}", e.kind()), 1);
+            tracing::debug!(pair = set.pair_seq, "no estimate: {e}");
+            msg.status = EstimateStatus::Rejected as u32;
+        }
+    }
+    msg
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::synthetic::SyntheticScenario;
+    use rand::SeedableRng;
+
+    fn set_at(t_s: f64) -> ObservationSetMsg {
+        let mut rng = rand::rngs::StdRng::seed_from_u64(3);
+        let trial = SyntheticScenario::default()
+            .trial(t_s, 4, &mut rng)
+            .expect("the default scenario keeps the target in view");
+        let mut set = ObservationSetMsg {
+            t_s,
+            ..Default::default()
+        };
+        for (i, (slot, o)) in set.entries.iter_mut().zip(&trial.observations).enumerate() {
+            *slot = o.to_entry();
+            slot.frame_seq = i as u64;
+            set.count += 1;
+        }
+        set
+    }
+
+    #[test]
+    fn a_good_set_gives_a_finite_estimate() {
+        let config = EstimatorConfig {
+            method: crate::EstimatorMethod::Paper,
+            ..Default::default()
+        };
+        let mut stats = StageStats::new("t");
+        let msg = estimate_message(&set_at(10.0), &config, None, &mut stats);
+        assert_eq!(msg.status, EstimateStatus::Ok as u32);
+        assert!(finite(&msg));
+        assert_eq!(stats.counter("estimates"), 1);
+    }
+
+    #[test]
+    fn bad_sets_are_counted_not_estimated() {
+        let config = EstimatorConfig::default();
+        let mut temporal = TemporalEstimator::new(config).unwrap();
+        let mut stats = StageStats::new("t");
+        let mut nan_pixel = set_at(10.0);
+        nan_pixel.entries[3].pixel[0] = f64::NAN;
+        let mut one = set_at(10.0);
+        one.count = 1;
+        let mut nan_time = set_at(10.0);
+        nan_time.t_s = f64::NAN;
+        for set in [nan_pixel, one, nan_time] {
+            let msg = estimate_message(&set, &config, Some(&mut temporal), &mut stats);
+            assert_eq!(msg.status, EstimateStatus::BadInput as u32);
+        }
+        assert_eq!(stats.counter("bad_input"), 3);
+        // The filter was not touched: a good set still estimates.
+        let msg = estimate_message(&set_at(10.5), &config, Some(&mut temporal), &mut stats);
+        assert_eq!(msg.status, EstimateStatus::Ok as u32);
+    }
+
+    #[test]
+    fn staleness_never_trusts_a_non_finite_time() {
+        assert!(!is_stale(1.0, None));
+        assert!(is_stale(1.0, Some(1.0)));
+        assert!(!is_stale(1.5, Some(1.0)));
+        assert!(is_stale(f64::NAN, None));
+        assert!(is_stale(f64::INFINITY, Some(1.0)));
+    }
+}

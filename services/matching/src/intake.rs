@@ -1,0 +1,409 @@
+//! The matching service's intake, without the transport: frames (a header and the
+//! pixels, as they lie in shared memory) and detections arrive in any order, a pair is
+//! complete when both frames have features and both detections are in, and the newest
+//! complete pair is matched against the keyframe rings into an [`ObservationSetMsg`].
+//! Every header field is untrusted (the fuzz target `frames` feeds it arbitrary bytes):
+//! a bad frame or detection is counted and dropped.
+//!
+//! The service shell (`main.rs`) receives the samples, calls [`Intake::extract`] with
+//! plain `(header, bytes)` views, [`Intake::on_detection`] per detection and
+//! [`Intake::next_set`] until it returns `None`.
+
+use crate::chain::{extract_undistorted, ChainCounts, FrameInput, FrameMeta, MatchOutcome};
+use crate::features::{Features, OrbExtractor};
+use crate::ring_store::RingStore;
+use crate::{ChainTiming, MatchingConfig, VisionChain};
+use anyhow::Result;
+use detection::frame_view::frame_mat;
+use geolocation::EstimatorConfig;
+use shared_types::clock::{elapsed_us, monotonic_ns};
+use shared_types::conventions::Intrinsics;
+use shared_types::lens::Distortion;
+use shared_types::messages::{DetectionMsg, FrameHeader, ObservationSetMsg, MAX_OBSERVATIONS};
+use shared_types::stats::StageStats;
+use std::collections::BTreeMap;
+use std::sync::Arc;
+
+/// Pairs older than this many sequence numbers behind the newest are abandoned.
+const MAX_PENDING_PAIRS: u64 = 4;
+
+/// A frame's header and its pixels, borrowed from a shared-memory sample.
+pub type FrameView<'a> = (FrameHeader, &'a [u8]);
+
+#[derive(Default)]
+struct Pending {
+    frames: [Option<(FrameHeader, Arc<Features>)>; 2],
+    detections: [Option<DetectionMsg>; 2],
+    orb_us: u64,
+}
+
+pub struct Intake {
+    /// Left frames finished with (processed, dropped or lost), not yet acknowledged to
+    /// acquisition: one acknowledgement per pair, for `--rate max` flow control.
+    pub acks: u64,
+    pub chain: VisionChain,
+    worker_orb: OrbExtractor,
+    pending: BTreeMap<u64, Pending>,
+    pub stats: StageStats,
+    /// Where the rings are checkpointed, and what was admitted since the last save.
+    store: Option<RingStore>,
+    unsaved: [bool; 2],
+}
+
+/// Features of the left frame from the pool thread, with its counts.
+type LeftFeatures = (FrameHeader, Arc<Features>, ChainCounts);
+
+/// A frame's pixels with what its header says (no detection yet: ORB does not need it).
+fn input<'a>(header: &FrameHeader, mat: &'a opencv::core::Mat) -> FrameInput<'a> {
+    let [fx, fy, cx, cy] = header.intrinsics;
+    FrameInput {
+        seq: header.seq,
+        t_s: header.t_s,
+        pose: header.pose,
+        image: mat,
+        detection: None,
+        intrinsics: Intrinsics::new(fx, fy, cx, cy),
+        distortion: Distortion(header.distortion),
+        width: header.width,
+        height: header.height,
+    }
+}
+
+fn meta(header: &FrameHeader, detection: &DetectionMsg) -> FrameMeta {
+    let [fx, fy, cx, cy] = header.intrinsics;
+    FrameMeta {
+        seq: header.seq,
+        t_s: header.t_s,
+        pose: header.pose,
+        detection: (detection.found == 1).then_some(detection.centre),
+        intrinsics: Intrinsics::new(fx, fy, cx, cy),
+        distortion: Distortion(header.distortion),
+        width: header.width,
+        height: header.height,
+    }
+}
+
+impl Intake {
+    pub fn new(config: MatchingConfig, estimator: EstimatorConfig) -> Result<Self> {
+        if config.images_per_uav * 2 > MAX_OBSERVATIONS {
+            anyhow::bail!(
+                "[matching] images_per_uav must be at most {}",
+                MAX_OBSERVATIONS / 2
+            );
+        }
+        Ok(Self {
+            acks: 0,
+            worker_orb: OrbExtractor::new(&config)?,
+            chain: VisionChain::new(config, estimator)?,
+            pending: BTreeMap::new(),
+            stats: StageStats::new("matching"),
+            store: None,
+            unsaved: [false; 2],
+        })
+    }
+
+    /// Refills the rings from `<state_dir>/matching` and checkpoints there from now on.
+    /// A store that cannot be trusted is counted and the rings start empty.
+    pub fn restore(
+        &mut self,
+        state_dir: &std::path::Path,
+        config: MatchingConfig,
+        estimator: EstimatorConfig,
+    ) -> Result<()> {
+        let mut store = RingStore::open(state_dir)?;
+        let start = monotonic_ns();
+        match store.restore(&mut self.chain) {
+            Ok(n) => {
+                self.stats.count("keyframes_restored", n as u64);
+                if n > 0 {
+                    tracing::info!(
+                        keyframes = n,
+                        ms = elapsed_us(start, monotonic_ns()) as f64 / 1e3,
+                        "keyframe rings restored"
+                    );
+                }
+            }
+            Err(e) => {
+                self.stats.count("checkpoint_refused", 1);
+                tracing::warn!("keyframe rings not restored, rebuilding them: {e}");
+                self.chain = VisionChain::new(config, estimator)?;
+            }
+        }
+        self.store = Some(store);
+        Ok(())
+    }
+
+    /// ORB on the newest frame of each UAV (left on a pool thread, right on this one),
+    /// waiting in the pending pairs for their detections. A frame the header does not
+    /// describe is counted (`bad_frames`) and dropped.
+    pub fn extract(&mut self, views: [Option<FrameView>; 2]) {
+        let start = monotonic_ns();
+        let [left, right] = views;
+        let (chain, worker_orb) = (&mut self.chain, &mut self.worker_orb);
+        let extract_right =
+            |chain: &mut VisionChain| -> Result<Option<(FrameHeader, Arc<Features>)>> {
+                let Some((header, payload)) = right else {
+                    return Ok(None);
+                };
+                let mat = frame_mat(&header, payload)?;
+                Ok(Some((header, chain.extract(&input(&header, &mat))?)))
+            };
+        let extract_left = |orb: &mut OrbExtractor| -> Result<Option<LeftFeatures>> {
+            let Some((header, payload)) = left else {
+                return Ok(None);
+            };
+            let mat = frame_mat(&header, payload)?;
+            let (features, counts) = extract_undistorted(orb, &input(&header, &mat))?;
+            Ok(Some((header, Arc::new(features), counts)))
+        };
+        // Left on a pool thread, right on this one. The pool's threads live as long as
+        // the process: OpenCV 4.6 keeps per-thread data (cv::TLSDataContainer, from
+        // parallel_for_) of every thread that ever called it, so a thread per pair
+        // leaked ~15 KB/s (heaptrack; issue #13).
+        let (l, r) = if left.is_some() && right.is_some() {
+            let mut l = None;
+            let r = rayon::in_place_scope(|scope| {
+                scope.spawn(|_| l = Some(extract_left(worker_orb)));
+                extract_right(chain)
+            });
+            (
+                l.unwrap_or_else(|| Err(anyhow::anyhow!("the left ORB task did not run"))),
+                r,
+            )
+        } else {
+            (extract_left(worker_orb), extract_right(chain))
+        };
+        let orb_us = elapsed_us(start, monotonic_ns());
+        let l = l.map(|found| {
+            found.map(|(header, features, counts)| {
+                self.chain.add_counts(&counts);
+                (header, features)
+            })
+        });
+        for (uav, result) in [l, r].into_iter().enumerate() {
+            match result {
+                Ok(Some((header, features))) => {
+                    let slot = self.pending.entry(header.seq).or_default();
+                    slot.frames[uav] = Some((header, features));
+                    slot.orb_us += orb_us;
+                    self.stats.record("orb", orb_us);
+                }
+                Ok(None) => {}
+                Err(e) => {
+                    tracing::warn!(uav, "frame rejected: {e:#}");
+                    self.stats.count("bad_frames", 1);
+                }
+            }
+        }
+    }
+
+    /// A detection waits in its pair; one naming no UAV is counted and dropped.
+    pub fn on_detection(&mut self, d: DetectionMsg) {
+        if d.uav > 1 {
+            self.stats.count("bad_detections", 1);
+            return;
+        }
+        self.pending.entry(d.seq).or_default().detections[d.uav as usize] = Some(d);
+    }
+
+    /// Matches the newest complete pair; abandons older and stale ones. A pair whose
+    /// matching fails is counted (`match_failed`) and dropped.
+    pub fn next_set(&mut self) -> Option<ObservationSetMsg> {
+        let complete = self.pending.iter().rev().find_map(|(seq, p)| {
+            (p.frames.iter().all(Option::is_some) && p.detections.iter().all(Option::is_some))
+                .then_some(*seq)
+        });
+        let newest = self.pending.keys().next_back().copied().unwrap_or(0);
+        let cutoff = complete.unwrap_or(newest.saturating_sub(MAX_PENDING_PAIRS));
+        let stale: Vec<u64> = self.pending.range(..cutoff).map(|(s, _)| *s).collect();
+        for s in stale {
+            if let Some(p) = self.pending.remove(&s) {
+                self.stats.count("pairs_abandoned", 1);
+                self.acks += p.frames[0].is_some() as u64;
+            }
+        }
+        let Some(seq) = complete else { return None };
+        let pair = self.pending.remove(&seq)?;
+        let (Some((hl, fl)), Some((hr, fr)), Some(dl), Some(dr)) = (
+            pair.frames[0].clone(),
+            pair.frames[1].clone(),
+            pair.detections[0],
+            pair.detections[1],
+        ) else {
+            return None;
+        };
+        self.stats.count("pairs", 1);
+        self.acks += 1;
+        let start = monotonic_ns();
+        let (ml, mr) = (meta(&hl, &dl), meta(&hr, &dr));
+        let features = [fl, fr];
+        let mut timing = ChainTiming::default();
+        let mut rejections = Vec::new();
+        let outcome =
+            match self
+                .chain
+                .match_current([&ml, &mr], &features, &mut timing, &mut rejections)
+            {
+                Ok(outcome) => outcome,
+                Err(e) => {
+                    // OpenCV refusing a frame the header described wrongly: that pair
+                    // is lost, the service goes on.
+                    self.stats.count("match_failed", 1);
+                    tracing::warn!(pair = seq, "matching failed: {e}");
+                    return None;
+                }
+            };
+        for (_, _, reason) in &rejections {
+            self.stats
+                .count(&format!("past_rejected.{}", reason.kind()), 1);
+        }
+        let c = self.chain.take_counts();
+        for (name, n) in [
+            ("retried_looser_ratio", c.retried_looser_ratio),
+            ("retry_rescued", c.retry_rescued),
+            ("fast_threshold_lowered", c.fast_threshold_lowered),
+            ("keypoints_outside_lens", c.keypoints_outside_lens),
+            ("detections_outside_lens", c.detections_outside_lens),
+        ] {
+            if n > 0 {
+                self.stats.count(name, n);
+            }
+        }
+        let set = match outcome {
+            MatchOutcome::NoDetection => {
+                self.stats.count("no_detection", 1);
+                None
+            }
+            MatchOutcome::NotEnoughHistory { .. } => {
+                self.stats.count("warming_up", 1);
+                None
+            }
+            MatchOutcome::Matched(m) => {
+                let fallbacks = m
+                    .past
+                    .iter()
+                    .flat_map(|p| p.models)
+                    .filter(|model| {
+                        *model == Some(crate::ground_plane::PlaneModel::EssentialFallback)
+                    })
+                    .count();
+                if fallbacks > 0 {
+                    self.stats.count("essential_fallback", fallbacks as u64);
+                }
+                let mut msg = ObservationSetMsg {
+                    pair_seq: seq,
+                    capture_ns: hl.capture_ns.min(hr.capture_ns),
+                    t_s: hl.t_s,
+                    rejected_past: rejections.len() as u32,
+                    ..Default::default()
+                };
+                let seqs = [hl.seq, hr.seq]
+                    .into_iter()
+                    .chain(m.past.iter().map(|p| p.seq));
+                let all = m.current.iter().chain(&m.past_observations).zip(seqs);
+                for (slot, (o, seq)) in msg.entries.iter_mut().zip(all).take(MAX_OBSERVATIONS) {
+                    *slot = o.to_entry();
+                    slot.frame_seq = seq;
+                    msg.count += 1;
+                }
+                Some(msg)
+            }
+        };
+        let admitted = self.chain.admit([&ml, &mr], &features);
+        self.unsaved = [self.unsaved[0] | admitted[0], self.unsaved[1] | admitted[1]];
+        let match_us = elapsed_us(start, monotonic_ns());
+        self.stats.record("match", match_us);
+        self.stats.record("compute", pair.orb_us / 2 + match_us);
+        set
+    }
+
+    /// Saves newly admitted keyframes (called after the sets are published).
+    pub fn checkpoint(&mut self) {
+        let Some(store) = self.store.as_mut() else {
+            return;
+        };
+        let unsaved = std::mem::take(&mut self.unsaved);
+        if !unsaved.iter().any(|u| *u) {
+            return;
+        }
+        let start = monotonic_ns();
+        match store.save(&self.chain, unsaved) {
+            Ok(()) => self
+                .stats
+                .record("checkpoint", elapsed_us(start, monotonic_ns())),
+            Err(e) => {
+                self.stats.count("checkpoint_failed", 1);
+                tracing::warn!("keyframes not checkpointed: {e}");
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use shared_types::messages::PixelFormat;
+
+    fn intake() -> Intake {
+        Intake::new(MatchingConfig::default(), EstimatorConfig::default()).unwrap()
+    }
+
+    fn header(seq: u64) -> FrameHeader {
+        FrameHeader {
+            seq,
+            pixel_format: PixelFormat::Bgr8 as u32,
+            width: 32,
+            height: 24,
+            stride: 96,
+            pose: shared_types::messages::PoseSample {
+                z_m: 100.0,
+                ..Default::default()
+            },
+            intrinsics: [30.0, 30.0, 16.0, 12.0],
+            ..Default::default()
+        }
+    }
+
+    #[test]
+    fn a_detection_of_no_uav_is_counted_and_dropped() {
+        let mut i = intake();
+        i.on_detection(DetectionMsg {
+            uav: 7,
+            ..Default::default()
+        });
+        assert_eq!(i.stats.counter("bad_detections"), 1);
+        assert!(i.pending.is_empty());
+    }
+
+    #[test]
+    fn a_frame_its_header_does_not_describe_is_counted_and_dropped() {
+        let mut i = intake();
+        let pixels = vec![0u8; 10];
+        i.extract([Some((header(0), pixels.as_slice())), None]);
+        assert_eq!(i.stats.counter("bad_frames"), 1);
+        assert!(i.pending.is_empty());
+    }
+
+    #[test]
+    fn a_pair_with_non_finite_headers_loses_the_pair_not_the_service() {
+        let mut i = intake();
+        let pixels = vec![90u8; 32 * 24 * 3];
+        let mut bad = header(0);
+        bad.intrinsics = [f64::NAN; 4];
+        bad.pose.yaw_deg = f64::INFINITY;
+        i.extract([
+            Some((bad, pixels.as_slice())),
+            Some((bad, pixels.as_slice())),
+        ]);
+        for uav in 0..2 {
+            i.on_detection(DetectionMsg {
+                uav,
+                found: 1,
+                centre: [f64::NAN, 3.0],
+                ..Default::default()
+            });
+        }
+        while i.next_set().is_some() {}
+        assert!(i.pending.is_empty(), "the pair was consumed or dropped");
+    }
+}
