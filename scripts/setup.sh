@@ -35,6 +35,9 @@ if ((${#missing[@]})); then
 fi
 
 bash "$(dirname "$0")/fetch_aerial.sh"
+# pymavlink and mcap for the tests of the MAVLink, CoT and MCAP outputs (target/pyenv).
+bash "$(dirname "$0")/py_test_env.sh" >/dev/null ||
+  echo "setup: pymavlink/mcap could not be installed; their tests will say so and skip" >&2
 
 if ! command -v cargo >/dev/null 2>&1; then
   echo "setup: cargo not found; install Rust (rustup) first" >&2

@@ -196,7 +196,7 @@ impl ObservationSetMsg {
 /// Geolocation's output for one stereo pair.
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
 #[repr(C)]
-#[type_name("dualgeo::EstimateMsg/v1")]
+#[type_name("dualgeo::EstimateMsg/v2")]
 pub struct EstimateMsg {
     pub pair_seq: u64,
     pub capture_ns: u64,
@@ -216,6 +216,13 @@ pub struct EstimateMsg {
     pub covariance: [f64; 16],
     /// Standard error of z, metres.
     pub altitude_std_error_m: f64,
+    /// Target velocity east, north (m/s), from the temporal filter; NaN when the method
+    /// keeps no state (MAVLink's "NaN if unknown").
+    pub velocity_mps: [f64; 2],
+    /// 1σ horizontal velocity accuracy √(σ_vx² + σ_vy²), m/s; NaN when unknown.
+    pub velocity_acc_mps: f64,
+    /// Distance from the left UAV's current (measured) position to the target, m.
+    pub range_m: f64,
 }
 
 /// Why an [`EstimateMsg`] carries no estimate.

@@ -17,6 +17,8 @@ pub struct SetEstimate {
     pub estimate: Estimate,
     /// Target velocity (v_x, v_y) in m/s, when the temporal filter ran.
     pub velocity: Option<[f64; 2]>,
+    /// Its 1σ per axis, m/s.
+    pub velocity_std_mps: Option<[f64; 2]>,
     /// The temporal filter re-opened its covariance (bias step suspected).
     pub reopened: bool,
     /// Rays the temporal filter gated out.
@@ -39,6 +41,7 @@ pub fn estimate_set(
         None => window.map(|f| SetEstimate {
             estimate: f.estimate,
             velocity: None,
+            velocity_std_mps: None,
             reopened: false,
             rays_rejected: 0,
         }),
@@ -49,6 +52,7 @@ pub fn estimate_set(
                 .map(|t| SetEstimate {
                     estimate: t.estimate,
                     velocity: Some(t.velocity),
+                    velocity_std_mps: Some(t.velocity_std_mps),
                     reopened: t.reopened,
                     rays_rejected: t.rays_rejected,
                 })

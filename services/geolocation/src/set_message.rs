@@ -66,6 +66,9 @@ fn estimate_unchecked(
         pair_seq: set.pair_seq,
         capture_ns: set.capture_ns,
         t_s: set.t_s,
+        velocity_mps: [f64::NAN; 2],
+        velocity_acc_mps: f64::NAN,
+        range_m: f64::NAN,
         ..Default::default()
     };
     if !set.t_s.is_finite() {
@@ -116,10 +119,16 @@ fn estimate_unchecked(
         if e.velocity.is_some() {
             stats.count("temporal_rays_rejected", e.rays_rejected as u64);
         }
-        e.estimate
+        e
     });
     match result {
-        Ok(e) => {
+        Ok(set_estimate) => {
+            if let (Some(v), Some(sd)) = (set_estimate.velocity, set_estimate.velocity_std_mps) {
+                msg.velocity_mps = v;
+                msg.velocity_acc_mps = sd[0].hypot(sd[1]);
+            }
+            let e = set_estimate.estimate;
+            msg.range_m = (e.position - observations[0].position).norm();
             stats.count("estimates", 1);
             msg.position = [e.position.x, e.position.y, e.position.z];
             msg.yaw_bias_deg = [e.yaw_bias[0].to_degrees(), e.yaw_bias[1].to_degrees()];

@@ -52,6 +52,8 @@ pub struct TemporalEstimate {
     pub estimate: Estimate,
     /// Target velocity (v_x, v_y), m/s.
     pub velocity: [f64; 2],
+    /// 1σ of v_x and v_y from the filter's covariance, m/s.
+    pub velocity_std_mps: [f64; 2],
     /// Rays used in this update and rays gated out.
     pub rays_used: usize,
     pub rays_rejected: usize,
@@ -493,6 +495,7 @@ impl TemporalEstimator {
                 images_used: accepted.len(),
             },
             velocity: [s[3], s[4]],
+            velocity_std_mps: [p[(3, 3)].max(0.0).sqrt(), p[(4, 4)].max(0.0).sqrt()],
             rays_used: accepted.len(),
             rays_rejected: rays.len() - accepted.len(),
             reopened,

@@ -8,6 +8,7 @@
 //! that these counters stay 0.
 
 use super::children::{describe, Service};
+use super::live_out::LiveOutputs;
 use super::restart::Supervision;
 use super::soak::Sampler;
 use super::track::TrackWriter;
@@ -30,6 +31,12 @@ use std::time::{Duration, Instant};
 const DRAIN_QUIET: Duration = Duration::from_millis(1500);
 /// ... or at the latest after this.
 const DRAIN_MAX: Duration = Duration::from_secs(15);
+
+/// Where valid estimates go as they arrive: track.csv, and the live outputs.
+pub struct Sinks {
+    pub track: TrackWriter,
+    pub live: LiveOutputs,
+}
 
 pub struct Collector {
     endpoint: Endpoint,
@@ -111,7 +118,7 @@ impl Collector {
         services: &mut [Service],
         supervision: Supervision,
         duration: Option<Duration>,
-        mut track: TrackWriter,
+        sinks: Sinks,
         sampler: Sampler,
     ) -> Result<Collected> {
         let waitset = WaitSetBuilder::new()
@@ -123,6 +130,10 @@ impl Collector {
         let tick = waitset
             .attach_interval(Duration::from_millis(25))
             .map_err(|e| anyhow::anyhow!("WaitSet interval: {e:?}"))?;
+        let Sinks {
+            mut track,
+            mut live,
+        } = sinks;
         let progress = Progress::new();
         let mut c = Collected {
             messages: 0,
@@ -164,11 +175,13 @@ impl Collector {
                         if admissible(&msg, last_t_s, &mut c.stats) {
                             last_t_s = Some(msg.t_s);
                             track.push(&msg)?;
+                            live.push(&msg, &mut c.stats);
                         }
                     }
                 }
                 c.supervision.watch(services)?;
                 if id.has_event_from(&tick) {
+                    live.tick(&mut c.stats);
                     progress.update(track.rows, c.messages, c.start_ns);
                     let restarts = c.supervision.restarts.len() as u64;
                     c.sampler.tick(services, restarts)?;

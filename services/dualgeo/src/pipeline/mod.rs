@@ -19,6 +19,7 @@ mod accuracy;
 mod children;
 mod collect;
 mod latency;
+mod live_out;
 mod outputs;
 pub(crate) mod plots;
 mod restart;
@@ -61,6 +62,8 @@ pub struct RunArgs {
     pub run_for_s: Option<f64>,
     #[command(flatten)]
     pub restart: restart::RestartArgs,
+    #[command(flatten)]
+    pub live_out: live_out::LiveOutArgs,
     /// Soak report: sample every process's memory and descriptors and the stages'
     /// latency this often (soak.csv, soak.png and a flatness verdict).
     #[arg(long, default_value_t = 60.0)]
@@ -108,6 +111,9 @@ pub fn run(args: &RunArgs) -> Result<()> {
     for name in children::SERVICES {
         children::service_binary(name)?;
     }
+    // Before any process starts: a bad address or a missing origin is refused here.
+    let (_, _, origin) = outputs::source_facts(args, Path::new(""))?;
+    let live = live_out::LiveOutputs::open(&args.live_out, origin)?;
     let out = &args.out;
     std::fs::create_dir_all(out).with_context(|| format!("create {}", out.display()))?;
     if !(args.sample_every_s.is_finite() && args.sample_every_s >= 0.1) {
@@ -192,7 +198,6 @@ pub fn run(args: &RunArgs) -> Result<()> {
         return Err(e);
     }
 
-    let (_, _, origin) = outputs::source_facts(args, &stream_dir)?;
     let track = track::TrackWriter::create(&out.join("track.csv"), origin)?;
     let supervision = restart::Supervision::new(args.restart);
     let duration = args.run_for_s.map(Duration::from_secs_f64);
@@ -201,7 +206,13 @@ pub fn run(args: &RunArgs) -> Result<()> {
         &stats_dir,
         Duration::from_secs_f64(args.sample_every_s),
     )?;
-    let outcome = collector.stream(&mut services, supervision, duration, track, sampler);
+    let outcome = collector.stream(
+        &mut services,
+        supervision,
+        duration,
+        collect::Sinks { track, live },
+        sampler,
+    );
     let failures = children::stop_all(&mut services, Duration::from_secs(10));
     let collected = match outcome {
         Ok(c) => c,

@@ -1,0 +1,159 @@
+//! The target, live, to ground-control software (issue #14): every valid estimate as a
+//! MAVLink CAMERA_TRACKING_GEO_STATUS (`--mavlink-out`, with a 1 Hz HEARTBEAT) and as a
+//! Cursor-on-Target event (`--cot-out`), over UDP. Sending never stops the run: a send
+//! that fails or would block is dropped and counted (`mavlink.send_failed`,
+//! `cot.send_failed`); what was sent is counted (`mavlink.sent`, `mavlink.heartbeats`,
+//! `cot.sent`) in the supervisor's counters.
+//!
+//! Both need the source's geodetic origin (recording.toml's `[origin]`; the built-in
+//! simulator has one): without it the run is refused before anything starts.
+
+mod cot_out;
+mod mavlink_out;
+mod udp;
+
+use super::track::{geodetic, one_sigma};
+use acquisition::recording::Origin;
+use anyhow::{bail, Result};
+use clap::Args;
+use shared_types::messages::{EstimateMsg, EstimateStatus};
+use shared_types::stats::StageStats;
+use std::time::{Duration, Instant};
+
+pub use cot_out::CotOut;
+pub use mavlink_out::MavlinkOut;
+
+#[derive(Args, Debug, Clone)]
+pub struct LiveOutArgs {
+    /// Send the target as MAVLink 2 CAMERA_TRACKING_GEO_STATUS (id 276) with a 1 Hz
+    /// HEARTBEAT to this address, e.g. udpout:127.0.0.1:14550 (QGroundControl's port).
+    #[arg(long, value_name = "udpout:HOST:PORT")]
+    pub mavlink_out: Option<String>,
+    /// MAVLink system id of dualgeo's component (255: the ground station's usual id).
+    #[arg(long, default_value_t = 255)]
+    pub mavlink_system_id: u8,
+    /// MAVLink component id (100: MAV_COMP_ID_CAMERA, the id a tracking camera uses).
+    #[arg(long, default_value_t = 100)]
+    pub mavlink_component_id: u8,
+    /// Geoid height N (m) at the origin: MAVLink's altitude is AMSL = ellipsoidal − N.
+    /// dualgeo carries no geoid model, so the default 0 sends the ellipsoidal height.
+    #[arg(long, default_value_t = 0.0)]
+    pub geoid_height_m: f64,
+    /// Send a Cursor-on-Target event per estimate to this address, e.g.
+    /// udp://239.2.3.1:6969 (TAK's SA multicast) or udp://127.0.0.1:4242.
+    #[arg(long, value_name = "udp://HOST:PORT")]
+    pub cot_out: Option<String>,
+    /// CoT type of the target (a-u-G-E-V: unknown ground vehicle).
+    #[arg(long, default_value = "a-u-G-E-V")]
+    pub cot_type: String,
+    /// Seconds after which a TAK client greys the target out if no newer event came.
+    #[arg(long, default_value_t = 5.0)]
+    pub cot_stale_s: f64,
+}
+
+/// One estimate as the outside world wants it: geodetic, with 1σ accuracies; NaN
+/// where unknown (MAVLink's convention).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TargetFix {
+    pub pair_seq: u64,
+    pub lat_deg: f64,
+    pub lon_deg: f64,
+    /// Height above the WGS84 ellipsoid, m.
+    pub hae_m: f64,
+    pub h_acc_m: f64,
+    pub v_acc_m: f64,
+    pub vel_north_mps: f64,
+    pub vel_east_mps: f64,
+    pub vel_acc_mps: f64,
+    pub range_m: f64,
+}
+
+impl TargetFix {
+    /// The fix of a valid estimate; `None` for a rejection.
+    pub fn of(e: &EstimateMsg, origin: &Origin) -> Option<Self> {
+        if e.status != EstimateStatus::Ok as u32 {
+            return None;
+        }
+        let (lat_deg, lon_deg, hae_m) = geodetic(origin, &e.position);
+        let (h_acc_m, v_acc_m) = one_sigma(e).unwrap_or((f64::NAN, f64::NAN));
+        // ENU: x east, y north (docs/conventions.md).
+        Some(Self {
+            pair_seq: e.pair_seq,
+            lat_deg,
+            lon_deg,
+            hae_m,
+            h_acc_m,
+            v_acc_m,
+            vel_north_mps: e.velocity_mps[1],
+            vel_east_mps: e.velocity_mps[0],
+            vel_acc_mps: e.velocity_acc_mps,
+            range_m: e.range_m,
+        })
+    }
+}
+
+/// The live outputs of a run (none, one or both).
+pub struct LiveOutputs {
+    origin: Option<Origin>,
+    mavlink: Option<MavlinkOut>,
+    cot: Option<CotOut>,
+    last_heartbeat: Option<Instant>,
+}
+
+impl LiveOutputs {
+    /// Opens the sockets; refuses a bad address, or an output without an origin.
+    pub fn open(args: &LiveOutArgs, origin: Option<Origin>) -> Result<Self> {
+        let wanted = args.mavlink_out.is_some() || args.cot_out.is_some();
+        if wanted && origin.is_none() {
+            bail!(
+                "--mavlink-out and --cot-out send latitude and longitude, but the source has \
+                 no geodetic origin (add an [origin] section to its recording.toml)"
+            );
+        }
+        if !(args.cot_stale_s.is_finite() && args.cot_stale_s > 0.0) {
+            bail!("--cot-stale-s must be a positive number of seconds");
+        }
+        if !args.geoid_height_m.is_finite() {
+            bail!("--geoid-height-m must be finite");
+        }
+        Ok(Self {
+            origin,
+            mavlink: args
+                .mavlink_out
+                .as_deref()
+                .map(|a| MavlinkOut::open(a, args))
+                .transpose()?,
+            cot: args
+                .cot_out
+                .as_deref()
+                .map(|a| CotOut::open(a, args))
+                .transpose()?,
+            last_heartbeat: None,
+        })
+    }
+
+    /// Sends `e` to every output (a rejection sends nothing).
+    pub fn push(&mut self, e: &EstimateMsg, stats: &mut StageStats) {
+        let Some(fix) = self.origin.as_ref().and_then(|o| TargetFix::of(e, o)) else {
+            return;
+        };
+        if let Some(m) = &mut self.mavlink {
+            m.send_fix(&fix, stats);
+        }
+        if let Some(c) = &mut self.cot {
+            c.send_fix(&fix, stats);
+        }
+    }
+
+    /// The 1 Hz HEARTBEAT (called on the supervisor's 25 ms tick).
+    pub fn tick(&mut self, stats: &mut StageStats) {
+        let Some(m) = &mut self.mavlink else { return };
+        if self
+            .last_heartbeat
+            .is_none_or(|t| t.elapsed() >= Duration::from_secs(1))
+        {
+            self.last_heartbeat = Some(Instant::now());
+            m.send_heartbeat(stats);
+        }
+    }
+}

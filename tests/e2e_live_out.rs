@@ -1,0 +1,189 @@
+//! Issue #14: the target goes out as MAVLink and Cursor-on-Target, and clients nobody
+//! here wrote decode every message: pymavlink (from PyPI, in target/pyenv, installed by
+//! scripts/py_test_env.sh) and Python's XML parser (tests/clients/listen.py). A short
+//! live-simulator run; each decoded position must match track.csv row for row.
+
+#[path = "support/scratch.rs"]
+mod scratch;
+
+use scratch::Scratch;
+use serde_json::Value;
+use std::io::{BufRead, BufReader, Read};
+use std::path::{Path, PathBuf};
+use std::process::{Command, Stdio};
+
+fn root() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")
+}
+
+/// The venv's python with pymavlink and mcap, or why there is none.
+fn python() -> Result<PathBuf, String> {
+    let o = Command::new("bash")
+        .arg(root().join("scripts/py_test_env.sh"))
+        .output()
+        .map_err(|e| e.to_string())?;
+    if !o.status.success() {
+        return Err(String::from_utf8_lossy(&o.stderr).into_owned());
+    }
+    Ok(PathBuf::from(String::from_utf8_lossy(&o.stdout).trim()))
+}
+
+/// (lat, lon, hae) of each row of track.csv.
+fn track(path: &Path) -> Vec<[f64; 3]> {
+    let text = std::fs::read_to_string(path).expect("track.csv");
+    let mut lines = text.lines();
+    let header: Vec<&str> = lines.next().expect("header").split(',').collect();
+    let col = |name: &str| header.iter().position(|h| *h == name).expect(name);
+    let (lat, lon, alt) = (col("lat_deg"), col("lon_deg"), col("alt_m"));
+    lines
+        .map(|l| {
+            let f: Vec<&str> = l.split(',').collect();
+            [lat, lon, alt].map(|i| f[i].parse::<f64>().expect("a geodetic column"))
+        })
+        .collect()
+}
+
+#[test]
+fn mavlink_and_cot_outputs_are_decoded_by_outside_clients() {
+    let python = match python() {
+        Ok(p) => p,
+        Err(e) => {
+            eprintln!("SKIPPED: pymavlink could not be installed from PyPI: {e}");
+            return;
+        }
+    };
+    let mut listener = Command::new(&python)
+        .arg(root().join("tests/clients/listen.py"))
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .spawn()
+        .expect("start the listener");
+    let mut out_lines = BufReader::new(listener.stdout.take().expect("stdout"));
+    let mut ports = String::new();
+    out_lines.read_line(&mut ports).expect("PORTS line");
+    let ports: Vec<&str> = ports.split_whitespace().skip(1).collect();
+    assert_eq!(ports.len(), 2, "listener said {ports:?}");
+
+    let dir = Scratch::new("live-out");
+    let out = dir.0.join("out");
+    let run = Command::new(env!("CARGO_BIN_EXE_dualgeo"))
+        .args(["run", "--duration-s", "6", "--out"])
+        .arg(&out)
+        .arg("--mavlink-out")
+        .arg(format!("udpout:127.0.0.1:{}", ports[0]))
+        .arg("--cot-out")
+        .arg(format!("udp://127.0.0.1:{}", ports[1]))
+        .output()
+        .expect("run dualgeo");
+    assert!(
+        run.status.success(),
+        "{}\n{}",
+        String::from_utf8_lossy(&run.stdout),
+        String::from_utf8_lossy(&run.stderr)
+    );
+    drop(listener.stdin.take()); // the listener reports when its stdin closes
+    let mut report = String::new();
+    out_lines.read_to_string(&mut report).expect("report");
+    assert!(listener.wait().expect("listener exit").success());
+    let report: Value = serde_json::from_str(report.trim()).expect("the listener's JSON");
+
+    let rows = track(&out.join("track.csv"));
+    assert!(rows.len() > 40, "only {} estimates in 6 s", rows.len());
+    assert_eq!(report["mavlink_bad"], 0, "undecodable MAVLink datagrams");
+    assert_eq!(report["cot_bad"], 0, "events that are not CoT 2.0");
+
+    let messages = report["mavlink"].as_array().expect("mavlink list");
+    let of_type = |t: &str| -> Vec<&Value> {
+        messages
+            .iter()
+            .filter(|m| m["mavpackettype"] == t)
+            .collect()
+    };
+    let tracking = of_type("CAMERA_TRACKING_GEO_STATUS");
+    let heartbeats = of_type("HEARTBEAT");
+    assert_eq!(tracking.len() + heartbeats.len(), messages.len());
+    assert_eq!(
+        tracking.len(),
+        rows.len(),
+        "one MAVLink message per estimate"
+    );
+    assert!(
+        heartbeats.len() >= 5,
+        "{} heartbeats in a 6 s run",
+        heartbeats.len()
+    );
+    for m in messages {
+        assert_eq!(m["srcSystem"], 255);
+        assert_eq!(m["srcComponent"], 100);
+    }
+    assert_eq!(heartbeats[0]["type"], 30, "MAV_TYPE_CAMERA");
+    for (m, row) in tracking.iter().zip(&rows) {
+        let lat = m["lat"].as_f64().unwrap() / 1e7;
+        let lon = m["lon"].as_f64().unwrap() / 1e7;
+        assert!(
+            (lat - row[0]).abs() < 2e-7 && (lon - row[1]).abs() < 2e-7,
+            "{m} vs {row:?}"
+        );
+        assert!(
+            (m["alt"].as_f64().unwrap() - row[2]).abs() < 0.01,
+            "{m} vs {row:?}"
+        );
+        assert!(m["h_acc"].as_f64().is_some_and(|h| h > 0.0), "{m}");
+        // The default estimator is the temporal filter: its velocity is known.
+        assert!(
+            m["vel_n"].as_f64().is_some() && m["vel_acc"].as_f64().is_some(),
+            "{m}"
+        );
+        assert!(
+            m["vel_d"].is_null(),
+            "no vertical velocity is modelled: NaN"
+        );
+        assert!(m["dist"].as_f64().is_some_and(|d| d > 50.0), "{m}");
+    }
+
+    let events = report["cot"].as_array().expect("cot list");
+    assert_eq!(events.len(), rows.len(), "one CoT event per estimate");
+    let uid = &events[0]["uid"];
+    for (ev, row) in events.iter().zip(&rows) {
+        assert_eq!(&ev["uid"], uid, "one target, one uid");
+        assert_eq!(ev["type"], "a-u-G-E-V");
+        let p = &ev["point"];
+        assert!((p["lat"].as_f64().unwrap() - row[0]).abs() < 1e-6, "{ev}");
+        assert!((p["lon"].as_f64().unwrap() - row[1]).abs() < 1e-6, "{ev}");
+        assert!(p["ce"].as_f64().unwrap() < 1000.0, "{ev}");
+        assert!(ev["stale"].as_str() > ev["time"].as_str());
+    }
+
+    let counters: Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("counters.json")).unwrap()).unwrap();
+    assert_eq!(counters["supervisor.mavlink.sent"], rows.len());
+    assert_eq!(counters["supervisor.cot.sent"], rows.len());
+    assert!(counters.get("supervisor.mavlink.send_failed").is_none());
+}
+
+#[test]
+fn an_output_address_that_is_wrong_is_refused_before_anything_starts() {
+    let dir = Scratch::new("live-out-bad");
+    for (flag, value, says) in [
+        ("--mavlink-out", "udp:127.0.0.1:14550", "udpout:HOST:PORT"),
+        ("--cot-out", "tcp://127.0.0.1:1", "udp://HOST:PORT"),
+        (
+            "--mavlink-out",
+            "udpout:no-such-host.invalid:1",
+            "cannot resolve",
+        ),
+    ] {
+        let o = Command::new(env!("CARGO_BIN_EXE_dualgeo"))
+            .args(["run", "--duration-s", "1", "--out"])
+            .arg(dir.0.join("out"))
+            .args([flag, value])
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .output()
+            .expect("run dualgeo");
+        let stderr = String::from_utf8_lossy(&o.stderr);
+        assert!(!o.status.success(), "{flag} {value} was accepted");
+        assert!(stderr.contains(says), "{flag} {value}: {stderr}");
+        assert!(!dir.0.join("out/track.csv").exists(), "something started");
+    }
+}
