@@ -1,6 +1,8 @@
 //! `dualgeo-acquisition`: the acquisition service shell. Streams stereo pairs from the
-//! live simulator or a recording into the frame services: each frame is rendered or
-//! decoded *directly into a loaned shared-memory sample* (the only write of its pixels),
+//! live simulator, a recording or a flight ([`acquisition::source`]) into the frame
+//! services: each frame is rendered or decoded *directly into a loaned shared-memory
+//! sample* (the only write of its pixels; a flight's video frame is decoded by OpenCV
+//! and copied once, docs/flight-io.md),
 //! stamped, sent, and the detection and matching stages are woken.
 //!
 //! Acquisition never blocks: when no sample can be loaned (every buffer in use), the pair
@@ -31,21 +33,21 @@
 //! Histograms (µs): `produce` (render or decode of a pair), `pacing_lag` (how late a
 //! pair left against its schedule), `resume` (skipping to the checkpointed position).
 //! Counters: `pairs_in`, `frames_in`, `pairs_dropped`, `bad_frames`, `loops`,
-//! `flow_timeouts`, `resumed`, `checkpoint_refused`, `checkpoint_failed`.
+//! `flow_timeouts`, `resumed`, `checkpoint_refused`, `checkpoint_failed`, and the
+//! source's own as `source.<name>` (a flight's `no_pose_position`, `no_pose_attitude`,
+//! `unpaired_frames`, `tlog_crc_errors`, `tlog_resyncs`, `tlog_truncated`).
 
 use acquisition::live_gate::{LiveGate, LiveSample};
-use acquisition::recording::{
-    decode_image_into, Recording, StereoPair, StreamLog, TelemetryRow, TruthRow,
-};
+use acquisition::recording::{StreamLog, TelemetryRow, TruthRow};
 use acquisition::resume::StreamPosition;
 use acquisition::sim::faults::FaultInjector;
-use acquisition::sim::{ScenarioArgs, SimConfig, Simulator};
+use acquisition::sim::ScenarioArgs;
 use anyhow::{bail, Context, Result};
 use clap::Parser;
 use iceoryx2::prelude::EventId;
 use shared_types::clock::{elapsed_us, monotonic_ns};
-use shared_types::conventions::{Intrinsics, Uav};
-use shared_types::messages::{FrameHeader, PixelFormat, PoseSample};
+use shared_types::conventions::Uav;
+use shared_types::messages::{FrameHeader, PixelFormat};
 use shared_types::shell::{init_tracing, ServiceArgs, StatsSaver};
 use shared_types::stats::StageStats;
 use shared_types::transport::{Endpoint, FramePublisher, Stage, END_OF_STREAM_EVENT};
@@ -96,176 +98,11 @@ fn parse_rate(s: &str) -> Result<Rate> {
     }
 }
 
-/// One pair's description, filled by the source.
-struct PairInfo {
-    t_s: f64,
-    poses: [PoseSample; 2],
-    truth: Option<[TruthRow; 2]>,
-}
-
-enum Source {
-    Sim {
-        config: Box<SimConfig>,
-        sim: Box<Simulator>,
-    },
-    Recording {
-        rec: Box<Recording>,
-        pairs: Vec<StereoPair>,
-        next: usize,
-    },
-}
-
-impl Source {
-    fn open(args: &Args) -> Result<Self> {
-        if args.source == "sim" {
-            let config = args.scenario.config()?;
-            let sim = Box::new(Simulator::new(config.clone())?);
-            Ok(Source::Sim {
-                config: Box::new(config),
-                sim,
-            })
-        } else {
-            let rec = Recording::open(&args.source)?;
-            let pairs = rec.pairs();
-            if pairs.is_empty() {
-                bail!(
-                    "{}: no stereo pairs (left and right images within half a frame period)",
-                    args.source
-                );
-            }
-            let widths = [Uav::Left, Uav::Right].map(|u| rec.meta.uav(u).camera);
-            if widths[0].width != widths[1].width || widths[0].height != widths[1].height {
-                bail!(
-                    "{}: left and right cameras must have the same image size",
-                    args.source
-                );
-            }
-            Ok(Source::Recording {
-                rec: Box::new(rec),
-                pairs,
-                next: 0,
-            })
-        }
-    }
-
-    fn size(&self) -> (u32, u32) {
-        match self {
-            Source::Sim { config, .. } => (config.camera.width, config.camera.height),
-            Source::Recording { rec, .. } => {
-                let c = rec.meta.uav(Uav::Left).camera;
-                (c.width, c.height)
-            }
-        }
-    }
-
-    fn intrinsics(&self, uav: Uav) -> Intrinsics {
-        match self {
-            Source::Sim { sim, .. } => sim.intrinsics(),
-            Source::Recording { rec, .. } => rec.meta.uav(uav).camera.intrinsics(),
-        }
-    }
-
-    /// Lens distortion of the pixels this source delivers (OpenCV's five coefficients).
-    fn distortion(&self, uav: Uav) -> [f64; 5] {
-        match self {
-            Source::Sim { sim, .. } => sim.distortion().0,
-            Source::Recording { rec, .. } => rec.meta.uav(uav).camera.distortion,
-        }
-    }
-
-    fn period_s(&self) -> f64 {
-        match self {
-            Source::Sim { config, .. } => 1.0 / config.frame_rate_hz,
-            Source::Recording { rec, .. } => 1.0 / rec.meta.frame_rate_hz,
-        }
-    }
-
-    /// Skips the first `n` pairs (a restart resuming its predecessor's position): the
-    /// simulator steps without rendering, a recording moves its index.
-    fn skip(&mut self, n: u64) {
-        match self {
-            Source::Sim { sim, .. } => {
-                for _ in 0..n {
-                    if sim.step().is_none() {
-                        break;
-                    }
-                }
-            }
-            Source::Recording { pairs, next, .. } => {
-                *next = usize::try_from(n).unwrap_or(usize::MAX).min(pairs.len());
-            }
-        }
-    }
-
-    /// Starts again from the first pair.
-    fn rewind(&mut self) -> Result<()> {
-        match self {
-            Source::Sim { config, sim } => **sim = Simulator::new((**config).clone())?,
-            Source::Recording { next, .. } => *next = 0,
-        }
-        Ok(())
-    }
-
-    /// Writes the next pair into `left` and `right`; `Ok(None)` at the end of the stream;
-    /// `Err` for a pair that could not be produced (the stream goes on).
-    fn next_pair(
-        &mut self,
-        left: &mut [u8],
-        right: &mut [u8],
-        stride: usize,
-    ) -> Option<Result<PairInfo>> {
-        match self {
-            Source::Sim { sim, .. } => {
-                let step = sim.step()?;
-                sim.render_pair(&step, left, right, stride);
-                let truth = step.frames.each_ref().map(|f| TruthRow {
-                    uav: f.uav,
-                    frame: f.seq,
-                    t_s: f.t_s,
-                    pose: f.true_pose,
-                    target: f.target,
-                    target_px: f.target_px,
-                });
-                Some(Ok(PairInfo {
-                    t_s: step.frames[0].t_s,
-                    poses: [step.frames[0].measured, step.frames[1].measured],
-                    truth: Some(truth),
-                }))
-            }
-            Source::Recording { rec, pairs, next } => {
-                let pair = *pairs.get(*next)?;
-                *next += 1;
-                let result = (|| -> Result<PairInfo> {
-                    for (index, dst) in [(pair.left, left), (pair.right, right)] {
-                        let row = &rec.telemetry[index];
-                        let camera = rec.meta.uav(row.uav).camera;
-                        decode_image_into(
-                            &rec.root.join(&row.file),
-                            camera.width,
-                            camera.height,
-                            dst,
-                        )?;
-                    }
-                    Ok(PairInfo {
-                        t_s: rec.telemetry[pair.left].t_s,
-                        poses: [
-                            rec.telemetry[pair.left].pose,
-                            rec.telemetry[pair.right].pose,
-                        ],
-                        truth: None,
-                    })
-                })();
-                Some(result)
-            }
-        }
-    }
-}
-
 fn main() -> Result<()> {
     let args = Args::parse();
     init_tracing("acquisition");
     let rate = parse_rate(&args.rate)?;
-    let mut source = Source::open(&args)?;
+    let mut source = acquisition::source::open(&args.source, &args.scenario)?;
     let (width, height) = source.size();
     let stride = width as usize * 3;
     let frame_bytes = stride * height as usize;
@@ -312,9 +149,10 @@ fn main() -> Result<()> {
             "resuming the stream"
         );
     }
-    let mut log = match (&source, &args.log_dir) {
-        (Source::Sim { .. }, Some(dir)) if resumed.is_some() => Some(StreamLog::reopen(dir)?),
-        (Source::Sim { .. }, Some(dir)) => Some(StreamLog::create(dir)?),
+    let live_sim = source.simulator_seed();
+    let mut log = match (live_sim, &args.log_dir) {
+        (Some(_), Some(dir)) if resumed.is_some() => Some(StreamLog::reopen(dir)?),
+        (Some(_), Some(dir)) => Some(StreamLog::create(dir)?),
         _ => None,
     };
     let intrinsics = [Uav::Left, Uav::Right].map(|u| {
@@ -324,9 +162,9 @@ fn main() -> Result<()> {
     let distortion = [Uav::Left, Uav::Right].map(|u| source.distortion(u));
     let mut saver = StatsSaver::new(&args.service);
     let mut gate = LiveGate::new((width, height), source.period_s());
-    let mut injector = match (&source, args.scenario.inject_faults) {
-        (Source::Sim { config, .. }, Some(rate)) => Some(
-            FaultInjector::new(config.seed, rate)
+    let mut injector = match (live_sim, args.scenario.inject_faults) {
+        (Some(seed), Some(rate)) => Some(
+            FaultInjector::new(seed, rate)
                 .with_context(|| format!("--inject-faults must be in [0, 1], got {rate}"))?,
         ),
         (_, Some(_)) => bail!("--inject-faults works with the live simulator only"),
@@ -405,14 +243,19 @@ fn main() -> Result<()> {
                 break 'stream;
             }
             Some(Err(e)) => {
-                position.consumed += 1;
+                position.consumed = source.consumed();
                 tracing::warn!("pair skipped: {e:#}");
                 stats.count("bad_frames", 1);
                 continue;
             }
             Some(Ok(info)) => info,
         };
-        position.consumed += 1;
+        position.consumed = source.consumed();
+        for (name, n) in source.take_counts() {
+            if n > 0 {
+                stats.count(&format!("source.{name}"), n);
+            }
+        }
         // The gate sees the stream's clock (a loop goes on forward), as a live source's.
         let mut delivered = info.poses.map(|pose| LiveSample {
             t_s: info.t_s + t_offset,
@@ -528,6 +371,11 @@ fn main() -> Result<()> {
         stats.count("frames_in", 2);
         seq += 1;
         saver.tick(&stats);
+    }
+    for (name, n) in source.take_counts() {
+        if n > 0 {
+            stats.count(&format!("source.{name}"), n);
+        }
     }
     if let Some(log) = log {
         log.finish()?;

@@ -1,6 +1,7 @@
-//! `dualgeo simulate`: render a scenario preset into a recording (format v1).
+//! `dualgeo simulate`: render a scenario preset into a recording (format v1), or into a
+//! flight (videos + MAVLink logs, `--flight-out`).
 
-use acquisition::sim::{record, ScenarioArgs, Simulator};
+use acquisition::sim::{record, record_flight, ScenarioArgs, Simulator};
 use anyhow::{Context, Result};
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
@@ -13,8 +14,13 @@ pub struct SimulateArgs {
     #[command(flatten)]
     scenario: ScenarioArgs,
     /// Output folder for the recording (must not exist or be empty).
-    #[arg(long, required_unless_present_any = ["list", "print"])]
+    #[arg(long, required_unless_present_any = ["list", "print", "flight_out"])]
     out: Option<PathBuf>,
+    /// Write the scenario as a flight instead: per UAV a video and a MAVLink .tlog,
+    /// flight.toml, and truth (docs/flight-io.md). Replay with `dualgeo run --source
+    /// DIR/flight.toml`.
+    #[arg(long, conflicts_with = "out")]
+    flight_out: Option<PathBuf>,
     /// List the presets and exit.
     #[arg(long)]
     list: bool,
@@ -43,7 +49,6 @@ pub fn run(args: &SimulateArgs) -> Result<()> {
         );
         return Ok(());
     }
-    let out = args.out.as_ref().context("--out is required")?;
     let started = Instant::now();
     let mut sim = Simulator::new(config)?;
     let total = sim.frame_count();
@@ -60,13 +65,26 @@ pub fn run(args: &SimulateArgs) -> Result<()> {
     } else {
         ProgressBar::hidden()
     };
-    let summary = record(&mut sim, &args.scenario.preset, out, |done, total| {
+    let progress = |done: u64, total: u64| {
         bar.set_position(done);
         if bar.is_hidden() && (done % 300 == 0 || done == total) {
             eprintln!("simulate: {done}/{total} stereo pairs");
         }
-    })
-    .with_context(|| format!("writing recording {}", out.display()))?;
+    };
+    let (out, summary) = match (&args.out, &args.flight_out) {
+        (_, Some(dir)) => {
+            let (summary, codec) = record_flight(&mut sim, &args.scenario.preset, dir, progress)
+                .with_context(|| format!("writing flight {}", dir.display()))?;
+            eprintln!("simulate: videos encoded as {codec} (MP4)");
+            (dir.join("flight.toml"), summary)
+        }
+        (Some(out), None) => {
+            let summary = record(&mut sim, &args.scenario.preset, out, progress)
+                .with_context(|| format!("writing recording {}", out.display()))?;
+            (out.clone(), summary)
+        }
+        (None, None) => anyhow::bail!("--out or --flight-out is required"),
+    };
     bar.finish_and_clear();
     println!(
         "wrote {} ({} stereo pairs, {} x {}, {:.1} s) in {:.1} s; target outside the image in {} frames",

@@ -6,7 +6,7 @@ mod image_file;
 mod image_header;
 mod meta;
 mod reader;
-mod rows;
+pub(crate) mod rows;
 mod stream_log;
 mod writer;
 

@@ -17,7 +17,7 @@ pub mod scenario_args;
 pub mod simulator;
 pub mod texture;
 
-pub use record::{record, RecordSummary};
+pub use record::{record, record_flight, RecordSummary};
 pub use scenario::{Presets, SimConfig, TrafficCar};
 pub use scenario_args::ScenarioArgs;
 pub use simulator::{SimFrame, SimStep, Simulator};

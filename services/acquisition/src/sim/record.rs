@@ -1,8 +1,10 @@
-//! Rendering a scenario into a recording (format v1) with truth.
+//! Rendering a scenario into a recording (format v1) or a flight (videos + tlogs), with
+//! truth.
 
-use super::simulator::Simulator;
+use super::simulator::{SimStep, Simulator};
 use super::SimError;
-use crate::recording::{CameraMeta, RecordingMeta, RecordingWriter, TruthSample};
+use crate::flight::writer::FlightWriter;
+use crate::recording::{CameraMeta, RecordingMeta, RecordingWriter, TruthRow, TruthSample};
 use opencv::core as cv;
 use opencv::prelude::*;
 use shared_types::conventions::Uav;
@@ -16,17 +18,69 @@ pub struct RecordSummary {
     pub target_outside: u64,
 }
 
-/// Renders every step of `sim` into a new recording at `out`; `progress(done, total)`
-/// is called after each stereo pair.
-pub fn record(
-    sim: &mut Simulator,
-    name: &str,
-    out: &Path,
-    mut progress: impl FnMut(u64, u64),
-) -> Result<RecordSummary, SimError> {
-    let config = sim.config().clone();
+/// Where rendered pairs go: a format-v1 recording or a flight (video + tlog).
+trait PairSink {
+    fn write_pair(
+        &mut self,
+        step: &SimStep,
+        left: &cv::Mat,
+        right: &cv::Mat,
+    ) -> Result<(), SimError>;
+}
+
+impl PairSink for RecordingWriter {
+    fn write_pair(
+        &mut self,
+        step: &SimStep,
+        left: &cv::Mat,
+        right: &cv::Mat,
+    ) -> Result<(), SimError> {
+        // PNG encoding costs more than rendering; encode both views at once.
+        let writer = &*self;
+        let (png_left, png_right) = std::thread::scope(|s| {
+            let l = s.spawn(|| writer.encode(Uav::Left, left));
+            let r = writer.encode(Uav::Right, right);
+            (l.join().expect("encoder thread panicked"), r)
+        });
+        for (frame, png) in step.frames.iter().zip([png_left?, png_right?]) {
+            let truth = TruthSample {
+                pose: frame.true_pose,
+                target: frame.target,
+                target_px: frame.target_px,
+            };
+            self.write_encoded_frame(frame.uav, frame.t_s, frame.measured, &png, Some(&truth))?;
+        }
+        Ok(())
+    }
+}
+
+impl PairSink for FlightWriter {
+    fn write_pair(
+        &mut self,
+        step: &SimStep,
+        left: &cv::Mat,
+        right: &cv::Mat,
+    ) -> Result<(), SimError> {
+        for (frame, image) in step.frames.iter().zip([left, right]) {
+            let truth = TruthRow {
+                uav: frame.uav,
+                frame: frame.seq,
+                t_s: frame.t_s,
+                pose: frame.true_pose,
+                target: frame.target,
+                target_px: frame.target_px,
+            };
+            self.write_frame(frame.uav, frame.t_s, image, frame.measured, &truth)
+                .map_err(SimError::Config)?;
+        }
+        Ok(())
+    }
+}
+
+fn camera_of(sim: &Simulator) -> CameraMeta {
+    let config = sim.config();
     let k = sim.intrinsics();
-    let camera = CameraMeta {
+    CameraMeta {
         width: config.camera.width,
         height: config.camera.height,
         fx: k.fx,
@@ -34,9 +88,54 @@ pub fn record(
         cx: k.cx,
         cy: k.cy,
         distortion: config.camera.distortion,
-    };
-    let meta = RecordingMeta::new(name, config.frame_rate_hz, camera, config.origin);
+    }
+}
+
+/// Renders every step of `sim` into a new recording at `out`; `progress(done, total)`
+/// is called after each stereo pair.
+pub fn record(
+    sim: &mut Simulator,
+    name: &str,
+    out: &Path,
+    progress: impl FnMut(u64, u64),
+) -> Result<RecordSummary, SimError> {
+    let config = sim.config().clone();
+    let meta = RecordingMeta::new(name, config.frame_rate_hz, camera_of(sim), config.origin);
     let mut writer = RecordingWriter::create(out, &meta, true)?;
+    let summary = render_into(sim, &mut writer, progress)?;
+    writer.finish()?;
+    Ok(summary)
+}
+
+/// Renders every step of `sim` into a flight at `out` (two videos, two tlogs,
+/// flight.toml, truth): what a real flight's ground station records. Returns the
+/// summary and the video codec used.
+pub fn record_flight(
+    sim: &mut Simulator,
+    name: &str,
+    out: &Path,
+    progress: impl FnMut(u64, u64),
+) -> Result<(RecordSummary, &'static str), SimError> {
+    let config = sim.config().clone();
+    let origin = config.origin.ok_or_else(|| {
+        SimError::Config(
+            "a flight needs the scenario's geodetic origin (the preset has none)".into(),
+        )
+    })?;
+    let mut writer = FlightWriter::create(out, name, config.frame_rate_hz, camera_of(sim), origin)
+        .map_err(SimError::Config)?;
+    let summary = render_into(sim, &mut writer, progress)?;
+    let codec = writer.codec();
+    writer.finish().map_err(SimError::Config)?;
+    Ok((summary, codec))
+}
+
+fn render_into(
+    sim: &mut Simulator,
+    sink: &mut impl PairSink,
+    mut progress: impl FnMut(u64, u64),
+) -> Result<RecordSummary, SimError> {
+    let config = sim.config().clone();
     let (w, h) = (config.camera.width as i32, config.camera.height as i32);
     let blank = || cv::Mat::new_rows_cols_with_default(h, w, cv::CV_8UC3, cv::Scalar::all(0.0));
     let cv_err = |e: opencv::Error| SimError::OpenCv(e.message);
@@ -47,7 +146,7 @@ pub fn record(
         frames_per_uav: 0,
         target_outside: 0,
     };
-    let mut spent = [Duration::ZERO; 3]; // render, encode, write
+    let mut spent = [Duration::ZERO; 2]; // render, encode + write
     while let Some(step) = sim.step() {
         let t0 = Instant::now();
         {
@@ -56,34 +155,18 @@ pub fn record(
             sim.render_pair(&step, l, r, stride);
         }
         let t1 = Instant::now();
-        // PNG encoding costs more than rendering; encode both views at once.
-        let (png_left, png_right) = std::thread::scope(|s| {
-            let l = s.spawn(|| writer.encode(Uav::Left, &left));
-            let r = writer.encode(Uav::Right, &right);
-            (l.join().expect("encoder thread panicked"), r)
-        });
-        let t2 = Instant::now();
-        for (frame, png) in step.frames.iter().zip([png_left?, png_right?]) {
-            let truth = TruthSample {
-                pose: frame.true_pose,
-                target: frame.target,
-                target_px: frame.target_px,
-            };
-            writer.write_encoded_frame(frame.uav, frame.t_s, frame.measured, &png, Some(&truth))?;
-            summary.target_outside += u64::from(frame.target_px.is_none());
-        }
+        sink.write_pair(&step, &left, &right)?;
+        summary.target_outside +=
+            step.frames.iter().filter(|f| f.target_px.is_none()).count() as u64;
         spent[0] += t1 - t0;
-        spent[1] += t2 - t1;
-        spent[2] += t2.elapsed();
+        spent[1] += t1.elapsed();
         summary.frames_per_uav += 1;
         progress(summary.frames_per_uav, total);
     }
-    writer.finish()?;
     let per_pair = |d: Duration| d.as_secs_f64() * 1e3 / summary.frames_per_uav.max(1) as f64;
     tracing::info!(
         render_ms = per_pair(spent[0]),
-        encode_ms = per_pair(spent[1]),
-        write_ms = per_pair(spent[2]),
+        write_ms = per_pair(spent[1]),
         "mean time per stereo pair"
     );
     Ok(summary)

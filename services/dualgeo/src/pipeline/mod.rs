@@ -102,9 +102,12 @@ pub fn run(args: &RunArgs) -> Result<()> {
     if let Some(c) = &args.config {
         check_config(c)?;
     }
-    if args.source != "sim" && !Path::new(&args.source).is_dir() {
+    let source = Path::new(&args.source);
+    let is_flight = source.is_file() && source.extension().is_some_and(|e| e == "toml");
+    if args.source != "sim" && !source.is_dir() && !is_flight {
         bail!(
-            "--source {}: not a directory (use `sim` or a recording directory)",
+            "--source {}: not a recording directory nor a flight.toml (use `sim`, a \
+             recording directory, or a flight's flight.toml)",
             args.source
         );
     }

@@ -24,6 +24,7 @@ use super::latency::{self, Gathered, LatencyReport};
 use super::plots;
 use super::track::{geodetic, read_back};
 use super::RunArgs;
+use acquisition::flight::FlightMeta;
 use acquisition::recording::{Origin, RecordingMeta};
 use anyhow::{Context, Result};
 use serde::Serialize;
@@ -118,6 +119,13 @@ pub(super) fn source_facts(
             config.frame_rate_hz,
             config.origin,
         ))
+    } else if args.source.ends_with(".toml") {
+        // A flight: its truth.csv and telemetry.csv (evaluation only, format v1) sit
+        // beside it; without them the report has no accuracy block.
+        let path = Path::new(&args.source);
+        let meta = FlightMeta::read(path).map_err(anyhow::Error::msg)?;
+        let dir = path.parent().unwrap_or(Path::new(".")).to_path_buf();
+        Ok((dir, meta.frame_rate_hz, Some(meta.origin)))
     } else {
         let dir = PathBuf::from(&args.source);
         let meta = RecordingMeta::read(&dir.join("recording.toml"))?;

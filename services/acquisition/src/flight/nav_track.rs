@@ -1,0 +1,256 @@
+//! The UAV's navigation state at a frame's moment, from telemetry samples: positions
+//! (WGS84, converted to the project's ENU about the flight's origin) and attitudes,
+//! each interpolated on its own to the frame's time on the autopilot clock.
+//!
+//! The rule that keeps a pose honest: a frame gets a pose only when each of position
+//! and attitude has a sample within `max_gap` (one frame period) on *both* sides of
+//! the frame's time (then it is interpolated), or one within [`SAME_INSTANT_S`] (then
+//! it is used as it is). Otherwise the frame has no pose and is dropped and counted:
+//! never extrapolated across a telemetry gap.
+
+use super::tlog::NavSample;
+use crate::recording::Origin;
+use shared_types::messages::PoseSample;
+
+/// Samples this close to a frame's time are taken as taken at it (the autopilot clock
+/// is in milliseconds).
+pub const SAME_INSTANT_S: f64 = 0.0015;
+
+/// Why a frame has no pose.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum NoPose {
+    /// No position sample close enough on both sides.
+    Position,
+    /// No attitude sample close enough on both sides.
+    Attitude,
+}
+
+#[derive(Debug, Clone, Default)]
+pub struct NavTrack {
+    /// (t, [x, y, z] ENU m), time-sorted.
+    positions: Vec<(f64, [f64; 3])>,
+    /// (t, [roll, pitch, yaw] rad), time-sorted.
+    attitudes: Vec<(f64, [f64; 3])>,
+}
+
+fn enu(origin: &Origin, lat_deg: f64, lon_deg: f64, hae_m: f64) -> [f64; 3] {
+    let (x, y, z) = map_3d::geodetic2enu(
+        lat_deg.to_radians(),
+        lon_deg.to_radians(),
+        hae_m,
+        origin.lat_deg.to_radians(),
+        origin.lon_deg.to_radians(),
+        origin.alt_m,
+        map_3d::Ellipsoid::WGS84,
+    );
+    [x, y, z]
+}
+
+/// `a + (b − a)·f` for angles, the short way round.
+fn lerp_angle(a: f64, b: f64, f: f64) -> f64 {
+    let d = (b - a + std::f64::consts::PI).rem_euclid(std::f64::consts::TAU) - std::f64::consts::PI;
+    a + d * f
+}
+
+/// The value at `t` of a time-sorted series, by the rule in the module's comment.
+fn at(
+    series: &[(f64, [f64; 3])],
+    t: f64,
+    max_gap: f64,
+    mix: impl Fn(&[f64; 3], &[f64; 3], f64) -> [f64; 3],
+) -> Option<[f64; 3]> {
+    let i = series.partition_point(|(ts, _)| *ts < t);
+    let before = i.checked_sub(1).map(|j| &series[j]);
+    let after = series.get(i);
+    for s in [before, after].into_iter().flatten() {
+        if (s.0 - t).abs() <= SAME_INSTANT_S {
+            return Some(s.1);
+        }
+    }
+    let ((ta, a), (tb, b)) = (before?, after?);
+    if t - ta > max_gap || tb - t > max_gap || tb <= ta {
+        return None;
+    }
+    Some(mix(a, b, (t - ta) / (tb - ta)))
+}
+
+impl NavTrack {
+    /// The track of `samples` (any order); non-finite samples are left out and counted.
+    /// `geoid_height_m` turns the messages' AMSL altitude into the ellipsoidal height
+    /// the origin uses.
+    pub fn new(samples: &[NavSample], origin: &Origin, geoid_height_m: f64) -> (Self, u64) {
+        let mut track = Self::default();
+        let mut bad = 0;
+        for s in samples {
+            match *s {
+                NavSample::Position {
+                    t_s,
+                    lat_deg,
+                    lon_deg,
+                    alt_m,
+                    ..
+                } => {
+                    let p = enu(origin, lat_deg, lon_deg, alt_m + geoid_height_m);
+                    if t_s.is_finite() && p.iter().all(|v| v.is_finite()) {
+                        track.positions.push((t_s, p));
+                    } else {
+                        bad += 1;
+                    }
+                }
+                NavSample::Attitude { t_s, rpy_rad } => {
+                    if t_s.is_finite() && rpy_rad.iter().all(|v| v.is_finite()) {
+                        track.attitudes.push((t_s, rpy_rad));
+                    } else {
+                        bad += 1;
+                    }
+                }
+            }
+        }
+        track.positions.sort_by(|a, b| a.0.total_cmp(&b.0));
+        track.attitudes.sort_by(|a, b| a.0.total_cmp(&b.0));
+        (track, bad)
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.positions.is_empty() || self.attitudes.is_empty()
+    }
+
+    /// First and last time both series cover.
+    pub fn span(&self) -> Option<(f64, f64)> {
+        let start = self.positions.first()?.0.max(self.attitudes.first()?.0);
+        let end = self.positions.last()?.0.min(self.attitudes.last()?.0);
+        (start <= end).then_some((start, end))
+    }
+
+    /// The pose at `t` (autopilot clock), or why there is none.
+    pub fn pose_at(&self, t: f64, max_gap: f64) -> Result<PoseSample, NoPose> {
+        let p = at(&self.positions, t, max_gap, |a, b, f| {
+            [0, 1, 2].map(|i| a[i] + (b[i] - a[i]) * f)
+        })
+        .ok_or(NoPose::Position)?;
+        let r = at(&self.attitudes, t, max_gap, |a, b, f| {
+            [0, 1, 2].map(|i| lerp_angle(a[i], b[i], f))
+        })
+        .ok_or(NoPose::Attitude)?;
+        Ok(PoseSample {
+            x_m: p[0],
+            y_m: p[1],
+            z_m: p[2],
+            roll_deg: r[0].to_degrees(),
+            pitch_deg: r[1].to_degrees(),
+            // ATTITUDE's yaw is in (−π, π]; the project's in degrees, any turn.
+            yaw_deg: r[2].to_degrees(),
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    const ORIGIN: Origin = Origin {
+        lat_deg: 47.0,
+        lon_deg: 8.0,
+        alt_m: 400.0,
+    };
+
+    fn position(t_s: f64, north_m: f64) -> NavSample {
+        NavSample::Position {
+            t_s,
+            lat_deg: 47.0 + north_m / 111_195.0,
+            lon_deg: 8.0,
+            alt_m: 500.0,
+            from_gps_raw: false,
+        }
+    }
+
+    fn attitude(t_s: f64, yaw: f64) -> NavSample {
+        NavSample::Attitude {
+            t_s,
+            rpy_rad: [0.0, 0.0, yaw],
+        }
+    }
+
+    #[test]
+    fn interpolates_between_samples_and_converts_to_enu() {
+        let (track, bad) = NavTrack::new(
+            &[
+                position(0.0, 0.0),
+                position(0.1, 10.0),
+                attitude(0.0, 0.0),
+                attitude(0.1, 0.2),
+            ],
+            &ORIGIN,
+            0.0,
+        );
+        assert_eq!(bad, 0);
+        let p = track.pose_at(0.05, 0.1).unwrap();
+        assert!((p.y_m - 5.0).abs() < 0.05 && p.x_m.abs() < 1e-6, "{p:?}");
+        assert!((p.z_m - 100.0).abs() < 0.01, "{p:?}");
+        assert!((p.yaw_deg - 0.1f64.to_degrees()).abs() < 1e-9);
+    }
+
+    #[test]
+    fn yaw_interpolates_the_short_way_round() {
+        let pi = std::f64::consts::PI;
+        let (track, _) = NavTrack::new(
+            &[
+                position(0.0, 0.0),
+                position(1.0, 0.0),
+                attitude(0.0, pi - 0.1),
+                attitude(1.0, -pi + 0.1),
+            ],
+            &ORIGIN,
+            0.0,
+        );
+        let yaw = track.pose_at(0.5, 1.0).unwrap().yaw_deg.to_radians();
+        assert!((yaw.abs() - pi).abs() < 1e-9, "{yaw}");
+    }
+
+    #[test]
+    fn never_across_a_gap_nor_beyond_the_ends() {
+        let (track, _) = NavTrack::new(
+            &[
+                position(0.0, 0.0),
+                position(1.0, 0.0),
+                attitude(0.0, 0.0),
+                attitude(1.0, 0.0),
+            ],
+            &ORIGIN,
+            0.0,
+        );
+        assert_eq!(track.pose_at(0.5, 0.033), Err(NoPose::Position));
+        assert!(track.pose_at(1.0005, 0.033).is_ok(), "the same instant");
+        assert_eq!(track.pose_at(1.01, 0.033), Err(NoPose::Position));
+        assert_eq!(track.pose_at(-0.01, 0.033), Err(NoPose::Position));
+    }
+
+    #[test]
+    fn non_finite_samples_are_left_out() {
+        let (track, bad) = NavTrack::new(
+            &[position(f64::NAN, 0.0), attitude(0.0, f64::INFINITY)],
+            &ORIGIN,
+            0.0,
+        );
+        assert_eq!(bad, 2);
+        assert!(track.is_empty());
+    }
+
+    proptest! {
+        /// Between two samples no interpolated value leaves their range.
+        #[test]
+        fn interpolation_stays_between_its_samples(
+            y0 in -100.0f64..100.0, y1 in -100.0f64..100.0, f in 0.0f64..1.0,
+        ) {
+            let (track, _) = NavTrack::new(
+                &[position(0.0, y0), position(0.03, y1), attitude(0.0, 0.0), attitude(0.03, 0.0)],
+                &ORIGIN,
+                0.0,
+            );
+            let p = track.pose_at(0.03 * f, 0.034).unwrap();
+            let (lo, hi) = (y0.min(y1) - 0.01, y0.max(y1) + 0.01);
+            prop_assert!(p.y_m >= lo && p.y_m <= hi, "{} not in [{lo}, {hi}]", p.y_m);
+        }
+    }
+}

@@ -1,0 +1,257 @@
+//! The flight source: per UAV a video and its MAVLink telemetry, named by flight.toml.
+//!
+//! Time alignment (docs/flight-io.md): both videos share time 0 (the flight's start);
+//! left frame k and right frame k form a pair when their video times differ by less
+//! than half a frame period (otherwise the earlier frame is dropped, `unpaired_frames`).
+//! A frame's moment on its UAV's autopilot clock is `video time + time_offset_s`; its
+//! pose is the telemetry interpolated there ([`NavTrack::pose_at`]), never extrapolated
+//! over more than a frame period: a frame without a pose loses its pair
+//! (`no_pose_position`, `no_pose_attitude`). The pair's stream time is the left
+//! frame's video time.
+
+use super::meta::{is_url, FlightMeta};
+use super::nav_track::{NavTrack, NoPose};
+use super::tlog::{parse_tlog, TlogCounts};
+use super::video::VideoReader;
+use crate::source::{FrameSource, PairInfo, SourceError};
+use shared_types::conventions::{Intrinsics, Uav};
+use std::path::{Path, PathBuf};
+
+pub struct FlightSource {
+    path: PathBuf,
+    meta: FlightMeta,
+    videos: [VideoReader; 2],
+    tracks: [NavTrack; 2],
+    counts: Vec<(&'static str, u64)>,
+    /// Kinds of dropped pair already logged.
+    warned: Vec<&'static str>,
+}
+
+fn open_videos(path: &Path, meta: &FlightMeta) -> Result<[VideoReader; 2], String> {
+    let open = |uav: Uav| {
+        let u = meta.uav(uav);
+        let source = meta.resolve(path, &u.video);
+        VideoReader::open(
+            &source.to_string_lossy(),
+            u.camera.width,
+            u.camera.height,
+            meta.frame_rate_hz,
+        )
+    };
+    Ok([open(Uav::Left)?, open(Uav::Right)?])
+}
+
+impl FlightSource {
+    /// Opens flight.toml, reads both telemetry logs whole and opens both videos.
+    /// Refused before anything streams: a bad flight.toml, a missing file, a log with
+    /// no usable samples, or a time offset that leaves no overlap between a video and
+    /// its telemetry.
+    pub fn open(path: &Path) -> Result<Self, String> {
+        let meta = FlightMeta::read(path)?;
+        let mut counts = Vec::new();
+        let mut tracks = [NavTrack::default(), NavTrack::default()];
+        for uav in [Uav::Left, Uav::Right] {
+            let u = meta.uav(uav);
+            if is_url(&u.telemetry) {
+                return Err(format!(
+                    "[uav.{}] telemetry {:?}: live MAVLink telemetry is not supported yet; \
+                     give a .tlog file",
+                    uav.name(),
+                    u.telemetry
+                ));
+            }
+            let log = meta.resolve(path, &u.telemetry);
+            let bytes = std::fs::read(&log).map_err(|e| format!("{}: {e}", log.display()))?;
+            let (samples, c) = parse_tlog(&bytes);
+            let TlogCounts {
+                crc_errors,
+                resyncs,
+                truncated,
+                ..
+            } = c;
+            if crc_errors + resyncs + truncated > 0 {
+                tracing::warn!(
+                    log = %log.display(), crc_errors, resyncs, truncated,
+                    "telemetry log has damaged records (skipped)"
+                );
+            }
+            counts.extend([
+                ("tlog_crc_errors", crc_errors),
+                ("tlog_resyncs", resyncs),
+                ("tlog_truncated", truncated),
+            ]);
+            let (track, bad) = NavTrack::new(&samples, &meta.origin, meta.geoid_height_m);
+            counts.push(("tlog_non_finite", bad));
+            let Some((start, end)) = track.span() else {
+                return Err(format!(
+                    "{}: no ATTITUDE with GLOBAL_POSITION_INT (or GPS_RAW_INT) samples",
+                    log.display()
+                ));
+            };
+            tracks[uav.index()] = track;
+            let video = meta.resolve(path, &u.video);
+            if !is_url(&u.video) {
+                let frames = frame_count(&video).unwrap_or(0.0);
+                let video_end = u.time_offset_s + frames / meta.frame_rate_hz;
+                if frames > 0.0 && (video_end < start || u.time_offset_s > end) {
+                    return Err(format!(
+                        "[uav.{}] time_offset_s = {}: the video covers {:.3}–{:.3} s on the \
+                         autopilot clock, the telemetry {start:.3}–{end:.3} s: no overlap",
+                        uav.name(),
+                        u.time_offset_s,
+                        u.time_offset_s,
+                        video_end
+                    ));
+                }
+            }
+        }
+        let videos = open_videos(path, &meta)?;
+        Ok(Self {
+            path: path.to_path_buf(),
+            meta,
+            videos,
+            tracks,
+            counts,
+            warned: Vec::new(),
+        })
+    }
+
+    fn count(&mut self, name: &'static str) {
+        self.counts.push((name, 1));
+    }
+
+    /// The next left and right frames whose video times pair (the earlier frame of a
+    /// mismatched pair is dropped); their video times.
+    fn next_frames(
+        &mut self,
+        left: &mut [u8],
+        right: &mut [u8],
+    ) -> Option<Result<(f64, f64), String>> {
+        let period = self.period_s();
+        let [lv, rv] = &mut self.videos;
+        let mut tl = match lv.next_into(left)? {
+            Ok(t) => t,
+            Err(e) => return Some(Err(e)),
+        };
+        let mut tr = match rv.next_into(right)? {
+            Ok(t) => t,
+            Err(e) => return Some(Err(e)),
+        };
+        while (tl - tr).abs() >= period / 2.0 {
+            self.counts.push(("unpaired_frames", 1));
+            let next = if tl < tr {
+                lv.next_into(left)?
+            } else {
+                rv.next_into(right)?
+            };
+            match next {
+                Ok(v) if tl < tr => tl = v,
+                Ok(v) => tr = v,
+                Err(e) => return Some(Err(e)),
+            }
+        }
+        Some(Ok((tl, tr)))
+    }
+}
+
+/// Frames in a video file, from its container (0 when unknown).
+fn frame_count(video: &Path) -> Option<f64> {
+    use opencv::prelude::*;
+    use opencv::videoio;
+    let cap = videoio::VideoCapture::from_file(video, videoio::CAP_FFMPEG).ok()?;
+    cap.get(videoio::CAP_PROP_FRAME_COUNT)
+        .ok()
+        .filter(|n| n.is_finite() && *n > 0.0)
+}
+
+impl FrameSource for FlightSource {
+    fn size(&self) -> (u32, u32) {
+        let c = &self.meta.uav.left.camera;
+        (c.width, c.height)
+    }
+
+    fn intrinsics(&self, uav: Uav) -> Intrinsics {
+        self.meta.uav(uav).camera.intrinsics()
+    }
+
+    fn distortion(&self, uav: Uav) -> [f64; 5] {
+        self.meta.uav(uav).camera.distortion
+    }
+
+    fn period_s(&self) -> f64 {
+        1.0 / self.meta.frame_rate_hz
+    }
+
+    /// Left frames read: pairs, and the frames dropped unpaired or without a pose.
+    fn consumed(&self) -> u64 {
+        self.videos[0].decoded
+    }
+
+    /// Skips `n` frames of each video (approximate when the previous run dropped
+    /// unpaired frames: the videos are assumed to start together).
+    fn skip(&mut self, n: u64) {
+        for v in &mut self.videos {
+            for _ in 0..n {
+                if !v.skip() {
+                    break;
+                }
+            }
+        }
+    }
+
+    fn rewind(&mut self) -> Result<(), SourceError> {
+        self.videos = open_videos(&self.path, &self.meta).map_err(SourceError::Flight)?;
+        Ok(())
+    }
+
+    /// The next pair that has a pose for both frames; pairs without are dropped and
+    /// counted (the first logged), never handed on.
+    fn next_pair(
+        &mut self,
+        left: &mut [u8],
+        right: &mut [u8],
+        _stride: usize,
+    ) -> Option<Result<PairInfo, SourceError>> {
+        let period = self.period_s();
+        loop {
+            let (tl, tr) = match self.next_frames(left, right)? {
+                Ok(t) => t,
+                Err(e) => return Some(Err(SourceError::Flight(e))),
+            };
+            let mut poses = [Default::default(); 2];
+            let mut missing = None;
+            for (uav, t) in [(Uav::Left, tl), (Uav::Right, tr)] {
+                let at = t + self.meta.uav(uav).time_offset_s;
+                match self.tracks[uav.index()].pose_at(at, period) {
+                    Ok(p) => poses[uav.index()] = p,
+                    Err(why) => missing = Some((uav, t, why)),
+                }
+            }
+            let Some((uav, t, why)) = missing else {
+                return Some(Ok(PairInfo {
+                    t_s: tl,
+                    poses,
+                    truth: None,
+                }));
+            };
+            let name = match why {
+                NoPose::Position => "no_pose_position",
+                NoPose::Attitude => "no_pose_attitude",
+            };
+            if !self.warned.contains(&name) {
+                self.warned.push(name);
+                tracing::warn!(
+                    uav = uav.name(),
+                    video_time_s = t,
+                    "a frame without telemetry within a frame period ({why:?}): its pair is \
+                     dropped (counted as {name} from now on)"
+                );
+            }
+            self.count(name);
+        }
+    }
+
+    fn take_counts(&mut self) -> Vec<(&'static str, u64)> {
+        std::mem::take(&mut self.counts)
+    }
+}

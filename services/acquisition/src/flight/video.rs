@@ -1,0 +1,211 @@
+//! Video in and out through OpenCV's videoio (Debian's libopencv-videoio, FFmpeg back
+//! end). Reading decodes into OpenCV's own frame and copies it once into the
+//! destination (the loaned shared-memory sample): videoio cannot decode into a
+//! caller's buffer. The copy is timed in acquisition's `decode` histogram.
+
+use opencv::core as cv;
+use opencv::prelude::*;
+use opencv::videoio;
+
+/// A video file or stream, decoded frame by frame.
+pub struct VideoReader {
+    cap: videoio::VideoCapture,
+    frame: cv::Mat,
+    source: String,
+    width: u32,
+    height: u32,
+    frame_rate_hz: f64,
+    /// Frames decoded since opening.
+    pub decoded: u64,
+    last_t: f64,
+}
+
+fn err(source: &str, e: impl std::fmt::Display) -> String {
+    format!("video {source}: {e}")
+}
+
+impl VideoReader {
+    /// Opens `source` (a path or a URL) expecting `width × height` frames.
+    pub fn open(source: &str, width: u32, height: u32, frame_rate_hz: f64) -> Result<Self, String> {
+        let cap = videoio::VideoCapture::from_file(source, videoio::CAP_FFMPEG)
+            .map_err(|e| err(source, e.message))?;
+        if !cap.is_opened().map_err(|e| err(source, e.message))? {
+            return Err(err(
+                source,
+                "cannot be opened (missing, or not a video FFmpeg reads)",
+            ));
+        }
+        Ok(Self {
+            cap,
+            frame: cv::Mat::default(),
+            source: source.to_string(),
+            width,
+            height,
+            frame_rate_hz,
+            decoded: 0,
+            last_t: f64::NEG_INFINITY,
+        })
+    }
+
+    /// Decodes the next frame into `dst` (packed BGR rows, `width × height × 3` bytes)
+    /// and returns its time in seconds from the video's start: the container's
+    /// timestamp, or `index / frame_rate_hz` when the container gives none that
+    /// increases. `None` at the end of the video.
+    pub fn next_into(&mut self, dst: &mut [u8]) -> Option<Result<f64, String>> {
+        match self.cap.read(&mut self.frame) {
+            Ok(true) => {}
+            Ok(false) => return None,
+            Err(e) => return Some(Err(err(&self.source, e.message))),
+        }
+        let index = self.decoded;
+        self.decoded += 1;
+        if self.frame.typ() != cv::CV_8UC3
+            || (self.frame.cols() as u32, self.frame.rows() as u32) != (self.width, self.height)
+        {
+            return Some(Err(err(
+                &self.source,
+                format!(
+                    "frame {index} is {}×{} (type {}), flight.toml says {}×{} BGR",
+                    self.frame.cols(),
+                    self.frame.rows(),
+                    self.frame.typ(),
+                    self.width,
+                    self.height
+                ),
+            )));
+        }
+        let copied = self
+            .frame
+            .data_bytes()
+            .map_err(|e| err(&self.source, e.message))
+            .and_then(|bytes| {
+                if bytes.len() == dst.len() {
+                    dst.copy_from_slice(bytes);
+                    Ok(())
+                } else {
+                    Err(err(&self.source, "frame size does not match the buffer"))
+                }
+            });
+        if let Err(e) = copied {
+            return Some(Err(e));
+        }
+        let pts = self.cap.get(videoio::CAP_PROP_POS_MSEC).unwrap_or(f64::NAN) / 1e3;
+        let t = if pts.is_finite() && pts > self.last_t {
+            pts
+        } else {
+            index as f64 / self.frame_rate_hz
+        };
+        self.last_t = t;
+        Some(Ok(t))
+    }
+
+    /// Skips one frame without converting it; false at the end.
+    pub fn skip(&mut self) -> bool {
+        self.decoded += 1;
+        self.cap.grab().unwrap_or(false)
+    }
+}
+
+/// Writes a video file: H.264 in MP4 when OpenCV's FFmpeg has an encoder for it,
+/// MPEG-4 part 2 (`mp4v`) otherwise. [`VideoSink::codec`] says which.
+pub struct VideoSink {
+    writer: videoio::VideoWriter,
+    pub codec: &'static str,
+}
+
+impl VideoSink {
+    pub fn create(
+        path: &std::path::Path,
+        width: u32,
+        height: u32,
+        frame_rate_hz: f64,
+    ) -> Result<Self, String> {
+        let name = path.to_string_lossy().to_string();
+        let size = cv::Size::new(width as i32, height as i32);
+        for (codec, fourcc) in [
+            ("h264", ['a', 'v', 'c', '1']),
+            ("mpeg4", ['m', 'p', '4', 'v']),
+        ] {
+            let fourcc = videoio::VideoWriter::fourcc(fourcc[0], fourcc[1], fourcc[2], fourcc[3])
+                .map_err(|e| err(&name, e.message))?;
+            let writer = videoio::VideoWriter::new_with_backend(
+                &name,
+                videoio::CAP_FFMPEG,
+                fourcc,
+                frame_rate_hz,
+                size,
+                true,
+            )
+            .map_err(|e| err(&name, e.message))?;
+            if writer.is_opened().unwrap_or(false) {
+                return Ok(Self { writer, codec });
+            }
+        }
+        Err(err(&name, "no H.264 or MPEG-4 encoder in OpenCV's FFmpeg"))
+    }
+
+    pub fn write(&mut self, frame: &cv::Mat) -> Result<(), String> {
+        self.writer.write(frame).map_err(|e| e.message)
+    }
+
+    pub fn finish(mut self) -> Result<(), String> {
+        self.writer.release().map_err(|e| e.message)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_written_video_reads_back_with_each_frames_own_time() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("v.mp4");
+        let mut sink = VideoSink::create(&path, 64, 48, 30.0).unwrap();
+        for k in 0..6 {
+            let frame = cv::Mat::new_rows_cols_with_default(
+                48,
+                64,
+                cv::CV_8UC3,
+                cv::Scalar::all(k as f64 * 40.0),
+            )
+            .unwrap();
+            sink.write(&frame).unwrap();
+        }
+        sink.finish().unwrap();
+        let mut reader = VideoReader::open(&path.to_string_lossy(), 64, 48, 30.0).unwrap();
+        let mut buf = vec![0u8; 64 * 48 * 3];
+        let mut times = Vec::new();
+        while let Some(t) = reader.next_into(&mut buf) {
+            times.push(t.unwrap());
+            let mean = buf.iter().map(|&b| b as f64).sum::<f64>() / buf.len() as f64;
+            let k = times.len() - 1;
+            assert!(
+                (mean - k as f64 * 40.0).abs() < 12.0,
+                "frame {k} has mean {mean}"
+            );
+        }
+        assert_eq!(times.len(), 6);
+        for (k, t) in times.iter().enumerate() {
+            assert!(
+                (t - k as f64 / 30.0).abs() < 1e-3,
+                "frame {k} at {t} s: {times:?}"
+            );
+        }
+    }
+
+    #[test]
+    fn a_frame_of_the_wrong_size_is_an_error_not_a_panic() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("v.mp4");
+        let mut sink = VideoSink::create(&path, 64, 48, 30.0).unwrap();
+        let frame =
+            cv::Mat::new_rows_cols_with_default(48, 64, cv::CV_8UC3, cv::Scalar::all(9.0)).unwrap();
+        sink.write(&frame).unwrap();
+        sink.finish().unwrap();
+        let mut reader = VideoReader::open(&path.to_string_lossy(), 32, 48, 30.0).unwrap();
+        let mut buf = vec![0u8; 32 * 48 * 3];
+        assert!(reader.next_into(&mut buf).unwrap().is_err());
+        assert!(VideoReader::open("/nonexistent.mp4", 64, 48, 30.0).is_err());
+    }
+}

@@ -1,0 +1,260 @@
+//! Where pairs come from: the live simulator, a recording (format v1) or a flight
+//! (video + MAVLink, [`crate::flight`]), behind one trait. The acquisition service
+//! streams whatever [`open`] gives it; each source writes a pair's pixels straight into
+//! the two loaned shared-memory frames it is handed.
+
+use crate::flight::FlightSource;
+use crate::recording::{decode_image_into, Recording, RecordingError, StereoPair, TruthRow};
+use crate::sim::{ScenarioArgs, SimConfig, SimError, Simulator};
+use shared_types::conventions::{Intrinsics, Uav};
+use shared_types::messages::PoseSample;
+use std::path::Path;
+
+#[derive(Debug, thiserror::Error)]
+pub enum SourceError {
+    #[error(transparent)]
+    Recording(#[from] RecordingError),
+    #[error(transparent)]
+    Sim(#[from] SimError),
+    #[error("{0}")]
+    Flight(String),
+    #[error("{0}")]
+    Invalid(String),
+}
+
+/// One pair's description, filled by the source.
+pub struct PairInfo {
+    /// Stream time of the pair (the left frame's), seconds.
+    pub t_s: f64,
+    /// Each UAV's navigation state at its frame's moment, as measured.
+    pub poses: [PoseSample; 2],
+    /// Truth, when the source knows it (the simulator): logged for evaluation only.
+    pub truth: Option<[TruthRow; 2]>,
+}
+
+pub trait FrameSource {
+    /// Width and height of both UAVs' frames.
+    fn size(&self) -> (u32, u32);
+    fn intrinsics(&self, uav: Uav) -> Intrinsics;
+    /// Lens distortion of the pixels this source delivers (OpenCV's five coefficients).
+    fn distortion(&self, uav: Uav) -> [f64; 5];
+    /// Time between pairs, seconds.
+    fn period_s(&self) -> f64;
+    /// The live simulator's seed (it alone can inject live-input faults and log its
+    /// stream); `None` for recorded sources.
+    fn simulator_seed(&self) -> Option<u64> {
+        None
+    }
+    /// Pairs taken from the source since the start or the last rewind, including the
+    /// ones it dropped itself: the position a restart resumes at with [`Self::skip`].
+    fn consumed(&self) -> u64;
+    /// Skips the first `n` pairs (a restart resuming its predecessor's position).
+    fn skip(&mut self, n: u64);
+    /// Starts again from the first pair.
+    fn rewind(&mut self) -> Result<(), SourceError>;
+    /// Writes the next pair into `left` and `right` (packed BGR rows of `stride`
+    /// bytes); `None` at the end of the stream; `Err` for a pair that could not be
+    /// produced (the stream goes on).
+    fn next_pair(
+        &mut self,
+        left: &mut [u8],
+        right: &mut [u8],
+        stride: usize,
+    ) -> Option<Result<PairInfo, SourceError>>;
+    /// Counters the source kept since the last call (name, increment).
+    fn take_counts(&mut self) -> Vec<(&'static str, u64)> {
+        Vec::new()
+    }
+}
+
+/// `sim`, a recording folder, or a flight.toml.
+pub fn open(source: &str, scenario: &ScenarioArgs) -> Result<Box<dyn FrameSource>, SourceError> {
+    if source == "sim" {
+        let config = scenario
+            .config()
+            .map_err(|e| SourceError::Invalid(e.to_string()))?;
+        return Ok(Box::new(SimSource::new(config)?));
+    }
+    let path = Path::new(source);
+    if path.is_file() && path.extension().is_some_and(|e| e == "toml") {
+        return Ok(Box::new(
+            FlightSource::open(path).map_err(SourceError::Flight)?,
+        ));
+    }
+    Ok(Box::new(RecordingSource::open(path)?))
+}
+
+pub struct SimSource {
+    config: SimConfig,
+    sim: Simulator,
+    steps: u64,
+}
+
+impl SimSource {
+    pub fn new(config: SimConfig) -> Result<Self, SourceError> {
+        let sim = Simulator::new(config.clone())?;
+        Ok(Self {
+            config,
+            sim,
+            steps: 0,
+        })
+    }
+}
+
+impl FrameSource for SimSource {
+    fn size(&self) -> (u32, u32) {
+        (self.config.camera.width, self.config.camera.height)
+    }
+
+    fn intrinsics(&self, _uav: Uav) -> Intrinsics {
+        self.sim.intrinsics()
+    }
+
+    fn distortion(&self, _uav: Uav) -> [f64; 5] {
+        self.sim.distortion().0
+    }
+
+    fn period_s(&self) -> f64 {
+        1.0 / self.config.frame_rate_hz
+    }
+
+    fn simulator_seed(&self) -> Option<u64> {
+        Some(self.config.seed)
+    }
+
+    fn consumed(&self) -> u64 {
+        self.steps
+    }
+
+    /// The simulator steps without rendering.
+    fn skip(&mut self, n: u64) {
+        for _ in 0..n {
+            if self.sim.step().is_none() {
+                break;
+            }
+            self.steps += 1;
+        }
+    }
+
+    fn rewind(&mut self) -> Result<(), SourceError> {
+        self.sim = Simulator::new(self.config.clone())?;
+        self.steps = 0;
+        Ok(())
+    }
+
+    fn next_pair(
+        &mut self,
+        left: &mut [u8],
+        right: &mut [u8],
+        stride: usize,
+    ) -> Option<Result<PairInfo, SourceError>> {
+        let step = self.sim.step()?;
+        self.steps += 1;
+        self.sim.render_pair(&step, left, right, stride);
+        let truth = step.frames.each_ref().map(|f| TruthRow {
+            uav: f.uav,
+            frame: f.seq,
+            t_s: f.t_s,
+            pose: f.true_pose,
+            target: f.target,
+            target_px: f.target_px,
+        });
+        Some(Ok(PairInfo {
+            t_s: step.frames[0].t_s,
+            poses: [step.frames[0].measured, step.frames[1].measured],
+            truth: Some(truth),
+        }))
+    }
+}
+
+pub struct RecordingSource {
+    rec: Recording,
+    pairs: Vec<StereoPair>,
+    next: usize,
+}
+
+impl RecordingSource {
+    pub fn open(root: &Path) -> Result<Self, SourceError> {
+        let rec = Recording::open(root)?;
+        let pairs = rec.pairs();
+        if pairs.is_empty() {
+            return Err(SourceError::Invalid(format!(
+                "{}: no stereo pairs (left and right images within half a frame period)",
+                root.display()
+            )));
+        }
+        let cameras = [Uav::Left, Uav::Right].map(|u| rec.meta.uav(u).camera);
+        if (cameras[0].width, cameras[0].height) != (cameras[1].width, cameras[1].height) {
+            return Err(SourceError::Invalid(format!(
+                "{}: left and right cameras must have the same image size",
+                root.display()
+            )));
+        }
+        Ok(Self {
+            rec,
+            pairs,
+            next: 0,
+        })
+    }
+}
+
+impl FrameSource for RecordingSource {
+    fn size(&self) -> (u32, u32) {
+        let c = self.rec.meta.uav(Uav::Left).camera;
+        (c.width, c.height)
+    }
+
+    fn intrinsics(&self, uav: Uav) -> Intrinsics {
+        self.rec.meta.uav(uav).camera.intrinsics()
+    }
+
+    fn distortion(&self, uav: Uav) -> [f64; 5] {
+        self.rec.meta.uav(uav).camera.distortion
+    }
+
+    fn period_s(&self) -> f64 {
+        1.0 / self.rec.meta.frame_rate_hz
+    }
+
+    fn consumed(&self) -> u64 {
+        self.next as u64
+    }
+
+    fn skip(&mut self, n: u64) {
+        self.next = usize::try_from(n)
+            .unwrap_or(usize::MAX)
+            .min(self.pairs.len());
+    }
+
+    fn rewind(&mut self) -> Result<(), SourceError> {
+        self.next = 0;
+        Ok(())
+    }
+
+    fn next_pair(
+        &mut self,
+        left: &mut [u8],
+        right: &mut [u8],
+        _stride: usize,
+    ) -> Option<Result<PairInfo, SourceError>> {
+        let pair = *self.pairs.get(self.next)?;
+        self.next += 1;
+        let rec = &self.rec;
+        let result = (|| -> Result<PairInfo, SourceError> {
+            for (index, dst) in [(pair.left, left), (pair.right, right)] {
+                let row = &rec.telemetry[index];
+                let camera = rec.meta.uav(row.uav).camera;
+                decode_image_into(&rec.root.join(&row.file), camera.width, camera.height, dst)?;
+            }
+            Ok(PairInfo {
+                t_s: rec.telemetry[pair.left].t_s,
+                poses: [
+                    rec.telemetry[pair.left].pose,
+                    rec.telemetry[pair.right].pose,
+                ],
+                truth: None,
+            })
+        })();
+        Some(result)
+    }
+}
