@@ -16,7 +16,7 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 
 seconds=20
-targets="recording image config checkpoint frames observations"
+targets="recording image config checkpoint frames observations flight"
 jobs=$(nproc)
 while (($#)); do
   case "$1" in

@@ -1,6 +1,7 @@
 //! `dualgeo simulate`: render a scenario preset into a recording (format v1), or into a
 //! flight (videos + MAVLink logs, `--flight-out`).
 
+use acquisition::flight::video::VideoCodec;
 use acquisition::sim::{record, record_flight, ScenarioArgs, Simulator};
 use anyhow::{Context, Result};
 use clap::Args;
@@ -21,6 +22,10 @@ pub struct SimulateArgs {
     /// DIR/flight.toml`.
     #[arg(long, conflicts_with = "out")]
     flight_out: Option<PathBuf>,
+    /// The flight's video encoding: `h264` (MP4, what a video link delivers) or
+    /// `lossless` (FFV1 in MKV, to measure the flight path without compression).
+    #[arg(long, default_value = "h264", value_parser = ["h264", "lossless"])]
+    flight_video: String,
     /// List the presets and exit.
     #[arg(long)]
     list: bool,
@@ -67,15 +72,20 @@ pub fn run(args: &SimulateArgs) -> Result<()> {
     };
     let progress = |done: u64, total: u64| {
         bar.set_position(done);
-        if bar.is_hidden() && (done % 300 == 0 || done == total) {
+        if bar.is_hidden() && (done.is_multiple_of(300) || done == total) {
             eprintln!("simulate: {done}/{total} stereo pairs");
         }
     };
     let (out, summary) = match (&args.out, &args.flight_out) {
         (_, Some(dir)) => {
-            let (summary, codec) = record_flight(&mut sim, &args.scenario.preset, dir, progress)
-                .with_context(|| format!("writing flight {}", dir.display()))?;
-            eprintln!("simulate: videos encoded as {codec} (MP4)");
+            let codec = match args.flight_video.as_str() {
+                "lossless" => VideoCodec::Lossless,
+                _ => VideoCodec::H264,
+            };
+            let (summary, codec) =
+                record_flight(&mut sim, &args.scenario.preset, dir, codec, progress)
+                    .with_context(|| format!("writing flight {}", dir.display()))?;
+            eprintln!("simulate: videos encoded as {codec}");
             (dir.join("flight.toml"), summary)
         }
         (Some(out), None) => {

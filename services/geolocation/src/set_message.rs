@@ -108,7 +108,7 @@ fn estimate_unchecked(
         .map(|(entry, o)| ((o.uav, entry.frame_seq), *o))
         .collect();
     let current = [&observations[0], &observations[1]];
-    let result = estimate_set(set.t_s, current, &past, config, temporal).map(|e| {
+    let result = estimate_set(set.t_s, current, &past, config, temporal).inspect(|e| {
         if e.reopened {
             stats.count("temporal_reopened", 1);
             tracing::info!(
@@ -119,7 +119,6 @@ fn estimate_unchecked(
         if e.velocity.is_some() {
             stats.count("temporal_rays_rejected", e.rays_rejected as u64);
         }
-        e
     });
     match result {
         Ok(set_estimate) => {

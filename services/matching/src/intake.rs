@@ -222,7 +222,7 @@ impl Intake {
                 self.acks += p.frames[0].is_some() as u64;
             }
         }
-        let Some(seq) = complete else { return None };
+        let seq = complete?;
         let pair = self.pending.remove(&seq)?;
         let (Some((hl, fl)), Some((hr, fr)), Some(dl), Some(dr)) = (
             pair.frames[0].clone(),

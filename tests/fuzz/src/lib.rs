@@ -15,11 +15,12 @@ pub mod targets;
 pub use bytes::{message, message_bytes, segments, Cursor, SEPARATOR};
 
 /// The targets by name, for `replay` and the seed writer.
-pub const TARGETS: [(&str, fn(&[u8])); 6] = [
+pub const TARGETS: [(&str, fn(&[u8])); 7] = [
     ("recording", targets::recording),
     ("image", targets::image),
     ("config", targets::config),
     ("checkpoint", targets::checkpoint),
     ("frames", targets::frames),
     ("observations", targets::observations),
+    ("flight", targets::flight),
 ];

@@ -3,6 +3,10 @@
 //! estimate out, no estimate out of time order); anything else may be an error.
 
 use crate::bytes::{segments, Cursor};
+use acquisition::flight::nav_track::NavTrack;
+use acquisition::flight::tlog::parse_tlog;
+use acquisition::flight::FlightMeta;
+use acquisition::recording::Origin;
 use acquisition::recording::{
     declared_size, decode_bytes_into, parse_telemetry, parse_truth, Recording, RecordingMeta,
 };
@@ -234,4 +238,29 @@ pub fn observations(data: &[u8]) {
     }
     let raw: EstimateMsg = c.message();
     let _ = raw.refusal(last_t);
+}
+
+/// A flight: flight.toml (segment 0) and a MAVLink telemetry log (segment 1), read as
+/// the flight source reads them, then poses asked for across and beyond the log.
+pub fn flight(data: &[u8]) {
+    let parts = segments(data);
+    let part = |i: usize| parts.get(i).copied().unwrap_or_default();
+    if let Ok(text) = std::str::from_utf8(part(0)) {
+        let _ = FlightMeta::parse(text, Path::new("flight.toml"));
+    }
+    let (samples, _) = parse_tlog(part(1));
+    let origin = Origin {
+        lat_deg: 47.0,
+        lon_deg: 8.0,
+        alt_m: 400.0,
+    };
+    let (track, _) = NavTrack::new(&samples, &origin, 0.0);
+    if let Some((start, end)) = track.span() {
+        for k in 0..=8 {
+            let t = start - 0.05 + (end - start + 0.1) * k as f64 / 8.0;
+            if let Ok(p) = track.pose_at(t, 1.0 / 30.0) {
+                assert!(p.is_finite(), "a non-finite pose at {t}: {p:?}");
+            }
+        }
+    }
 }

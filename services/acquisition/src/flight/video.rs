@@ -106,26 +106,52 @@ impl VideoReader {
     }
 }
 
-/// Writes a video file: H.264 in MP4 when OpenCV's FFmpeg has an encoder for it,
-/// MPEG-4 part 2 (`mp4v`) otherwise. [`VideoSink::codec`] says which.
+/// What the simulator encodes a flight's videos as.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum VideoCodec {
+    /// H.264 in MP4 (x264's default quality, crf 23: OpenCV 4.6's writer sets no
+    /// other), falling back to MPEG-4 part 2 when there is no H.264 encoder: what a
+    /// UAV's video link delivers.
+    H264,
+    /// FFV1 in Matroska: lossless, to measure the flight path without compression.
+    Lossless,
+}
+
+impl VideoCodec {
+    /// (name, FourCC, file extension), in order of preference.
+    fn candidates(self) -> &'static [(&'static str, [char; 4], &'static str)] {
+        match self {
+            VideoCodec::H264 => &[
+                ("h264", ['a', 'v', 'c', '1'], "mp4"),
+                ("mpeg4", ['m', 'p', '4', 'v'], "mp4"),
+            ],
+            VideoCodec::Lossless => &[("ffv1", ['F', 'F', 'V', '1'], "mkv")],
+        }
+    }
+}
+
+/// Writes a video file in the first encoding of a [`VideoCodec`] that OpenCV's FFmpeg
+/// has; [`VideoSink::codec`] says which, [`VideoSink::file_name`] where.
 pub struct VideoSink {
     writer: videoio::VideoWriter,
     pub codec: &'static str,
+    pub file_name: String,
 }
 
 impl VideoSink {
+    /// `stem` is the file's path without its extension (the codec picks it).
     pub fn create(
-        path: &std::path::Path,
+        stem: &std::path::Path,
+        codec: VideoCodec,
         width: u32,
         height: u32,
         frame_rate_hz: f64,
     ) -> Result<Self, String> {
-        let name = path.to_string_lossy().to_string();
         let size = cv::Size::new(width as i32, height as i32);
-        for (codec, fourcc) in [
-            ("h264", ['a', 'v', 'c', '1']),
-            ("mpeg4", ['m', 'p', '4', 'v']),
-        ] {
+        let mut name = stem.to_string_lossy().to_string();
+        for &(codec, fourcc, ext) in codec.candidates() {
+            let path = stem.with_extension(ext);
+            name = path.to_string_lossy().to_string();
             let fourcc = videoio::VideoWriter::fourcc(fourcc[0], fourcc[1], fourcc[2], fourcc[3])
                 .map_err(|e| err(&name, e.message))?;
             let writer = videoio::VideoWriter::new_with_backend(
@@ -138,10 +164,18 @@ impl VideoSink {
             )
             .map_err(|e| err(&name, e.message))?;
             if writer.is_opened().unwrap_or(false) {
-                return Ok(Self { writer, codec });
+                let file_name = path
+                    .file_name()
+                    .map(|n| n.to_string_lossy().to_string())
+                    .unwrap_or_default();
+                return Ok(Self {
+                    writer,
+                    codec,
+                    file_name,
+                });
             }
         }
-        Err(err(&name, "no H.264 or MPEG-4 encoder in OpenCV's FFmpeg"))
+        Err(err(&name, "no encoder for it in OpenCV's FFmpeg"))
     }
 
     pub fn write(&mut self, frame: &cv::Mat) -> Result<(), String> {
@@ -160,8 +194,9 @@ mod tests {
     #[test]
     fn a_written_video_reads_back_with_each_frames_own_time() {
         let dir = tempfile::tempdir().unwrap();
-        let path = dir.path().join("v.mp4");
-        let mut sink = VideoSink::create(&path, 64, 48, 30.0).unwrap();
+        let mut sink =
+            VideoSink::create(&dir.path().join("v"), VideoCodec::H264, 64, 48, 30.0).unwrap();
+        let path = dir.path().join(&sink.file_name);
         for k in 0..6 {
             let frame = cv::Mat::new_rows_cols_with_default(
                 48,
@@ -197,8 +232,9 @@ mod tests {
     #[test]
     fn a_frame_of_the_wrong_size_is_an_error_not_a_panic() {
         let dir = tempfile::tempdir().unwrap();
-        let path = dir.path().join("v.mp4");
-        let mut sink = VideoSink::create(&path, 64, 48, 30.0).unwrap();
+        let mut sink =
+            VideoSink::create(&dir.path().join("v"), VideoCodec::H264, 64, 48, 30.0).unwrap();
+        let path = dir.path().join(&sink.file_name);
         let frame =
             cv::Mat::new_rows_cols_with_default(48, 64, cv::CV_8UC3, cv::Scalar::all(9.0)).unwrap();
         sink.write(&frame).unwrap();

@@ -11,7 +11,7 @@
 
 use super::meta::{FlightMeta, FlightUav, FlightUavPair, FLIGHT_FORMAT, FLIGHT_VERSION};
 use super::tlog::TlogWriter;
-use super::video::VideoSink;
+use super::video::{VideoCodec, VideoSink};
 use crate::recording::rows::{telemetry_record, truth_record};
 use crate::recording::{
     CameraMeta, Origin, TelemetryRow, TruthRow, TELEMETRY_HEADER, TRUTH_HEADER,
@@ -56,6 +56,7 @@ impl FlightWriter {
         frame_rate_hz: f64,
         camera: CameraMeta,
         origin: Origin,
+        codec: VideoCodec,
     ) -> Result<Self, String> {
         if dir.exists()
             && std::fs::read_dir(dir)
@@ -68,7 +69,8 @@ impl FlightWriter {
         std::fs::create_dir_all(dir).map_err(|e| io(dir, e))?;
         let sink = |uav: Uav| {
             VideoSink::create(
-                &dir.join(format!("{}.mp4", uav.name())),
+                &dir.join(uav.name()),
+                codec,
                 camera.width,
                 camera.height,
                 frame_rate_hz,
@@ -89,7 +91,7 @@ impl FlightWriter {
             Ok(w)
         };
         let uav = |u: Uav| FlightUav {
-            video: format!("{}.mp4", u.name()),
+            video: videos[u.index()].file_name.clone(),
             telemetry: format!("{}.tlog", u.name()),
             time_offset_s: BOOT_OFFSET_S,
             camera,
@@ -175,7 +177,7 @@ impl FlightWriter {
         let row = TelemetryRow {
             uav,
             frame,
-            file: format!("{}.mp4#{frame}", uav.name()),
+            file: format!("{}#{frame}", self.meta.uav(uav).video),
             t_s,
             pose: measured,
         };

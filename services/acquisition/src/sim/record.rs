@@ -3,6 +3,7 @@
 
 use super::simulator::{SimStep, Simulator};
 use super::SimError;
+use crate::flight::video::VideoCodec;
 use crate::flight::writer::FlightWriter;
 use crate::recording::{CameraMeta, RecordingMeta, RecordingWriter, TruthRow, TruthSample};
 use opencv::core as cv;
@@ -114,6 +115,7 @@ pub fn record_flight(
     sim: &mut Simulator,
     name: &str,
     out: &Path,
+    codec: VideoCodec,
     progress: impl FnMut(u64, u64),
 ) -> Result<(RecordSummary, &'static str), SimError> {
     let config = sim.config().clone();
@@ -122,8 +124,15 @@ pub fn record_flight(
             "a flight needs the scenario's geodetic origin (the preset has none)".into(),
         )
     })?;
-    let mut writer = FlightWriter::create(out, name, config.frame_rate_hz, camera_of(sim), origin)
-        .map_err(SimError::Config)?;
+    let mut writer = FlightWriter::create(
+        out,
+        name,
+        config.frame_rate_hz,
+        camera_of(sim),
+        origin,
+        codec,
+    )
+    .map_err(SimError::Config)?;
     let summary = render_into(sim, &mut writer, progress)?;
     let codec = writer.codec();
     writer.finish().map_err(SimError::Config)?;

@@ -302,6 +302,51 @@ fn checkpoint_seeds(dir: &Path) {
     write(dir, "checkpoint", "all-kinds", &join(&parts));
 }
 
+fn flight_seeds(dir: &Path) {
+    use acquisition::flight::tlog::TlogWriter;
+    use mavlink::dialects::common::{MavMessage, ATTITUDE_DATA, GLOBAL_POSITION_INT_DATA};
+    let mut log = TlogWriter::new(Vec::new(), 1);
+    for k in 0..20u32 {
+        let at = 1_767_225_600_000_000 + k as u64 * 33_333;
+        log.write(
+            at,
+            &MavMessage::ATTITUDE(ATTITUDE_DATA {
+                time_boot_ms: 100_000 + k * 33,
+                roll: 0.01,
+                pitch: -0.02,
+                yaw: 3.1 - k as f32 * 0.01,
+                ..Default::default()
+            }),
+        )
+        .expect("write");
+        log.write(
+            at,
+            &MavMessage::GLOBAL_POSITION_INT(GLOBAL_POSITION_INT_DATA {
+                time_boot_ms: 100_000 + k * 33,
+                lat: 470_000_000 + k as i32 * 30,
+                lon: 80_000_000,
+                alt: 500_000,
+                ..Default::default()
+            }),
+        )
+        .expect("write");
+    }
+    let toml = "format = \"dualgeo-flight\"\nversion = 1\nname = \"seed\"\nframe_rate_hz = 30.0\n\
+        [origin]\nlat_deg = 47.0\nlon_deg = 8.0\nalt_m = 400.0\n\
+        [uav.left]\nvideo = \"left.mp4\"\ntelemetry = \"left.tlog\"\ntime_offset_s = 100.0\n\
+        [uav.left.camera]\nwidth = 64\nheight = 48\nfx = 50.0\nfy = 50.0\ncx = 32.0\ncy = 24.0\n\
+        distortion = [0.0, 0.0, 0.0, 0.0, 0.0]\n\
+        [uav.right]\nvideo = \"right.mp4\"\ntelemetry = \"right.tlog\"\n\
+        [uav.right.camera]\nwidth = 64\nheight = 48\nfx = 50.0\nfy = 50.0\ncx = 32.0\ncy = 24.0\n\
+        distortion = [0.0, 0.0, 0.0, 0.0, 0.0]\n";
+    write(
+        dir,
+        "flight",
+        "toml-and-tlog",
+        &join(&[toml.as_bytes().to_vec(), log.into_inner()]),
+    );
+}
+
 fn main() {
     let Some(out) = std::env::args().nth(1) else {
         eprintln!("usage: seeds OUT_DIR");
@@ -313,5 +358,6 @@ fn main() {
     config_seeds(dir);
     message_seeds(dir);
     checkpoint_seeds(dir);
+    flight_seeds(dir);
     println!("seed corpus written to {}", dir.display());
 }
