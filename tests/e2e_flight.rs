@@ -97,6 +97,17 @@ fn a_simulated_flight_replays_through_the_pipeline() {
             "{name}: {counters}"
         );
     }
+
+    // A left video shorter than its telemetry (and than the right video): the stream
+    // ends with it, cleanly.
+    let short = dir.0.join("short");
+    simulate_flight(&short, 3);
+    std::fs::copy(short.join("left.mp4"), dir.0.join("flight/left.mp4")).unwrap();
+    let out = dir.0.join("out-short");
+    let o = run(&flight, &out);
+    assert!(o.status.success(), "{}", text(&o));
+    let report = json(&out.join("report.json"));
+    assert_eq!(report["pairs_in"], 90, "{report}");
 }
 
 #[test]

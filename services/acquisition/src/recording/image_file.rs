@@ -27,18 +27,22 @@ fn check_container(
     height: u32,
 ) -> Result<(), RecordingError> {
     check_markers(path, bytes)?;
-    let (got_width, got_height) =
-        super::image_header::declared_size(bytes).map_err(|e| unreadable(path, e))?;
-    if (got_width, got_height) != (width, height) {
-        return Err(RecordingError::ImageSize {
-            path: path.into(),
-            want_width: width,
-            want_height: height,
-            got_width,
-            got_height,
-        });
+    let got = super::image_header::declared_size(bytes).map_err(|e| unreadable(path, e))?;
+    same_size(path, got, (width, height))
+}
+
+/// An image of `got` size where recording.toml says `want`.
+fn same_size(path: &Path, got: (u32, u32), want: (u32, u32)) -> Result<(), RecordingError> {
+    if got == want {
+        return Ok(());
     }
-    Ok(())
+    Err(RecordingError::ImageSize {
+        path: path.into(),
+        want_width: want.0,
+        want_height: want.1,
+        got_width: got.0,
+        got_height: got.1,
+    })
 }
 
 /// Checks the container's start and end markers.
@@ -67,17 +71,11 @@ fn check_size(
     width: u32,
     height: u32,
 ) -> Result<(), RecordingError> {
-    let (got_width, got_height) = (mat.cols() as u32, mat.rows() as u32);
-    if (got_width, got_height) != (width, height) {
-        return Err(RecordingError::ImageSize {
-            path: path.into(),
-            want_width: width,
-            want_height: height,
-            got_width,
-            got_height,
-        });
-    }
-    Ok(())
+    same_size(
+        path,
+        (mat.cols() as u32, mat.rows() as u32),
+        (width, height),
+    )
 }
 
 fn read_file(path: &Path) -> Result<Vec<u8>, RecordingError> {

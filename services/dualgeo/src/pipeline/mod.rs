@@ -106,8 +106,8 @@ pub fn run(args: &RunArgs) -> Result<()> {
     let is_flight = source.is_file() && source.extension().is_some_and(|e| e == "toml");
     if args.source != "sim" && !source.is_dir() && !is_flight {
         bail!(
-            "--source {}: not a recording directory nor a flight.toml (use `sim`, a \
-             recording directory, or a flight's flight.toml)",
+            "--source {}: not a directory or a flight.toml (use `sim`, a recording \
+             directory, or a flight's flight.toml)",
             args.source
         );
     }
