@@ -39,7 +39,9 @@ cargo afl build --release --quiet --manifest-path tests/fuzz/Cargo.toml
 bin="$CARGO_TARGET_DIR/release"
 
 echo "fuzz: replaying the committed corpus" >&2
-"$bin/replay" --corpus tests/fuzz/corpus 2>/dev/null
+# A panic names the file it replayed last (stderr), so a regression is found at once.
+"$bin/replay" --corpus tests/fuzz/corpus 2>"$CARGO_TARGET_DIR/replay.log" ||
+  { tail -n 20 "$CARGO_TARGET_DIR/replay.log" >&2; exit 1; }
 
 out="$CARGO_TARGET_DIR/out"
 rm -rf "$out"
@@ -65,23 +67,25 @@ wait
 
 status=0
 summary="$CARGO_TARGET_DIR/summary.md"
+# Built in this shell (not a pipeline's subshell), so `status` survives.
 {
   echo "| target | executions | execs/s | corpus entries | coverage map | crashes | hangs |"
   echo "| --- | ---: | ---: | ---: | ---: | ---: | ---: |"
-  for t in $targets; do
-    stats="$out/$t/default/fuzzer_stats"
-    if [[ ! -f $stats ]]; then
-      echo "| $t | did not run (see $out/$t.log) | | | | | |"
-      status=1
-      continue
-    fi
-    get() { awk -F' *: *' -v k="$1" '$1 == k { print $2 }' "$stats"; }
-    crashes=$(find "$out/$t/default/crashes" -type f ! -name README.txt | wc -l)
-    hangs=$(find "$out/$t/default/hangs" -type f | wc -l)
-    echo "| $t | $(get execs_done) | $(get execs_per_sec) | $(get corpus_count) | $(get bitmap_cvg) | $crashes | $hangs |"
-    if ((crashes + hangs > 0)); then status=1; fi
-  done
-} | tee "$summary"
+} >"$summary"
+for t in $targets; do
+  stats="$out/$t/default/fuzzer_stats"
+  if [[ ! -f $stats ]]; then
+    echo "| $t | did not run (see $out/$t.log) | | | | | |" >>"$summary"
+    status=1
+    continue
+  fi
+  get() { awk -F' *: *' -v k="$1" '$1 == k { print $2 }' "$stats"; }
+  crashes=$(find "$out/$t/default/crashes" -type f ! -name README.txt | wc -l)
+  hangs=$(find "$out/$t/default/hangs" -type f | wc -l)
+  echo "| $t | $(get execs_done) | $(get execs_per_sec) | $(get corpus_count) | $(get bitmap_cvg) | $crashes | $hangs |" >>"$summary"
+  if ((crashes + hangs > 0)); then status=1; fi
+done
+cat "$summary"
 if ((status)); then
   echo "fuzz: FAILED (crashes, hangs or a target that did not run); inputs in $out/<target>/default/" >&2
 fi

@@ -231,6 +231,11 @@ impl EstimateMsg {
     /// (not newer) or `non_finite` (an `Ok` status with a non-finite time, position or
     /// bias). `None`: it may. The supervisor's guard on what it reads.
     pub fn refusal(&self, last_t_s: Option<f64>) -> Option<&'static str> {
+        // Whatever the status: a non-finite time would become the "last" one and
+        // refuse everything after it.
+        if !self.t_s.is_finite() {
+            return Some("non_finite");
+        }
         if last_t_s.is_some_and(|t| self.t_s.partial_cmp(&t) != Some(std::cmp::Ordering::Greater)) {
             return Some("out_of_order");
         }
@@ -278,6 +283,9 @@ mod tests {
     #[test]
     fn message_sizes_are_fixed() {
         assert_eq!(std::mem::size_of::<DetectionMsg>(), 96);
+        // 4·8 + 4·4 + 3·8 + 2·8 + 16·8 + 8 + 2·8 + 8 + 8: no padding (the fuzz targets
+        // read it from arbitrary bytes).
+        assert_eq!(std::mem::size_of::<EstimateMsg>(), 256);
         assert_eq!(std::mem::size_of::<ObservationEntry>(), 112);
         assert_eq!(
             std::mem::size_of::<ObservationSetMsg>(),
@@ -303,8 +311,14 @@ mod tests {
             t_s: f64::NAN,
             ..ok
         };
-        assert_eq!(nan_time.refusal(Some(1.0)), Some("out_of_order"));
+        assert_eq!(nan_time.refusal(Some(1.0)), Some("non_finite"));
         assert_eq!(nan_time.refusal(None), Some("non_finite"));
+        let rejected_inf_time = EstimateMsg {
+            t_s: f64::INFINITY,
+            status: EstimateStatus::Rejected as u32,
+            ..ok
+        };
+        assert_eq!(rejected_inf_time.refusal(None), Some("non_finite"));
         let nan_position = EstimateMsg {
             position: [0.0, f64::NAN, 0.0],
             ..ok

@@ -42,6 +42,7 @@ use acquisition::recording::{StreamLog, TelemetryRow, TruthRow};
 use acquisition::resume::StreamPosition;
 use acquisition::sim::faults::FaultInjector;
 use acquisition::sim::ScenarioArgs;
+use acquisition::source::SourceError;
 use anyhow::{bail, Context, Result};
 use clap::Parser;
 use iceoryx2::prelude::EventId;
@@ -241,6 +242,13 @@ fn main() -> Result<()> {
                     continue;
                 }
                 break 'stream;
+            }
+            Some(Err(SourceError::Dropped)) => {
+                position.consumed = source.consumed();
+                for (name, n) in source.take_counts() {
+                    stats.count(&format!("source.{name}"), n);
+                }
+                continue;
             }
             Some(Err(e)) => {
                 position.consumed = source.consumed();

@@ -20,6 +20,10 @@ pub enum SourceError {
     Flight(String),
     #[error("{0}")]
     Invalid(String),
+    /// A pair the source dropped and counted itself (a flight's telemetry gap): not an
+    /// error to log, a reason to go on.
+    #[error("pair dropped by the source")]
+    Dropped,
 }
 
 /// One pair's description, filled by the source.

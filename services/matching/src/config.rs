@@ -182,6 +182,13 @@ impl MatchingConfig {
         if self.images_per_uav < 1 || self.ring_capacity < self.images_per_uav {
             return Err("need images_per_uav >= 1 and ring_capacity >= images_per_uav".into());
         }
+        // Each keyframe holds its features (~100 KB): a typo must not reserve gigabytes.
+        if self.ring_capacity > 1024 {
+            return Err(format!(
+                "ring_capacity {} is above 1024",
+                self.ring_capacity
+            ));
+        }
         let ok = self.keyframe_spacing_m.is_finite()
             && self.keyframe_spacing_m >= 0.0
             && self.baseline_smoothing_s.is_finite()

@@ -85,6 +85,7 @@ fn meta(header: &FrameHeader, detection: &DetectionMsg) -> FrameMeta {
 
 impl Intake {
     pub fn new(config: MatchingConfig, estimator: EstimatorConfig) -> Result<Self> {
+        config.validate().map_err(anyhow::Error::msg)?;
         if config.images_per_uav * 2 > MAX_OBSERVATIONS {
             anyhow::bail!(
                 "[matching] images_per_uav must be at most {}",

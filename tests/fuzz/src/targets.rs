@@ -161,7 +161,7 @@ pub fn frames(data: &[u8]) {
         panic!("the default configuration must start matching and detection");
     };
     let mut c = Cursor::new(data);
-    for _ in 0..24 {
+    for _ in 0..48 {
         if c.is_empty() {
             break;
         }
@@ -191,6 +191,10 @@ pub fn frames(data: &[u8]) {
     }
     while let Some(set) = intake.next_set() {
         assert!(set.count as usize <= shared_types::messages::MAX_OBSERVATIONS);
+    }
+    // For seed authors: which matching states an input reached.
+    if std::env::var_os("DUALGEO_FUZZ_DEBUG").is_some() {
+        eprintln!("{:?}", intake.stats.counters);
     }
 }
 
@@ -248,7 +252,7 @@ pub fn flight(data: &[u8]) {
     if let Ok(text) = std::str::from_utf8(part(0)) {
         let _ = FlightMeta::parse(text, Path::new("flight.toml"));
     }
-    let (samples, _) = parse_tlog(part(1));
+    let samples: Vec<_> = parse_tlog(part(1)).0.into_iter().map(|(_, s)| s).collect();
     let origin = Origin {
         lat_deg: 47.0,
         lon_deg: 8.0,
@@ -258,7 +262,7 @@ pub fn flight(data: &[u8]) {
     if let Some((start, end)) = track.span() {
         for k in 0..=8 {
             let t = start - 0.05 + (end - start + 0.1) * k as f64 / 8.0;
-            if let Ok(p) = track.pose_at(t, 1.0 / 30.0) {
+            if let Ok(p) = track.pose_at(t, 0.5) {
                 assert!(p.is_finite(), "a non-finite pose at {t}: {p:?}");
             }
         }

@@ -5,7 +5,8 @@
 //! format = "dualgeo-flight"
 //! version = 1
 //! name = "demo"
-//! frame_rate_hz = 30.0          # the videos' rate: pairing window and pose gap limit
+//! frame_rate_hz = 30.0          # the videos' rate: the pairing window
+//! max_telemetry_gap_s = 0.5     # interpolate poses across at most this (default 0.5)
 //! truth = "truth.csv"           # optional, evaluation only: format v1's truth.csv and
 //!                               # telemetry.csv beside flight.toml
 //! geoid_height_m = 0.0          # N: ellipsoidal height = MAVLink AMSL altitude + N
@@ -17,8 +18,9 @@
 //!
 //! [uav.left]
 //! video = "left.mp4"            # a file (relative to flight.toml) or a stream URL
-//! telemetry = "left.tlog"       # a .tlog file, or udpin:ADDR:PORT for live MAVLink
+//! telemetry = "left.tlog"       # a .tlog file (live udpin: is not supported yet)
 //! time_offset_s = 100.0         # autopilot clock (time_boot_ms) at video time 0
+//! system_id = 1                 # optional: the autopilot's system id in the log
 //! [uav.left.camera]             # as recording.toml's camera
 //! width = 640
 //! ...
@@ -39,7 +41,15 @@ pub struct FlightUav {
     pub telemetry: String,
     #[serde(default)]
     pub time_offset_s: f64,
+    /// The MAVLink system id of this UAV's autopilot in its log; needed only when the
+    /// log holds navigation messages of more than one system.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub system_id: Option<u8>,
     pub camera: CameraMeta,
+}
+
+fn default_max_telemetry_gap_s() -> f64 {
+    0.5
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -60,6 +70,10 @@ pub struct FlightMeta {
     pub truth: Option<String>,
     #[serde(default)]
     pub geoid_height_m: f64,
+    /// Poses are interpolated between telemetry samples at most this far apart (each of
+    /// position and attitude); a frame in a longer gap has no pose.
+    #[serde(default = "default_max_telemetry_gap_s")]
+    pub max_telemetry_gap_s: f64,
     pub origin: Origin,
     pub uav: FlightUavPair,
 }
@@ -110,6 +124,15 @@ impl FlightMeta {
         let o = &self.origin;
         if !(o.lat_deg.abs() <= 90.0 && o.lon_deg.abs() <= 180.0 && o.alt_m.is_finite()) {
             return Err("[origin] must be a WGS84 latitude, longitude and finite height".into());
+        }
+        if !(self.max_telemetry_gap_s.is_finite()
+            && self.max_telemetry_gap_s > 0.0
+            && self.max_telemetry_gap_s <= 10.0)
+        {
+            return Err(format!(
+                "max_telemetry_gap_s {} must be in (0, 10]",
+                self.max_telemetry_gap_s
+            ));
         }
         if !self.geoid_height_m.is_finite() || self.geoid_height_m.abs() > 200.0 {
             return Err(format!(

@@ -91,7 +91,11 @@ impl NavTrack {
                     ..
                 } => {
                     let p = enu(origin, lat_deg, lon_deg, alt_m + geoid_height_m);
-                    if t_s.is_finite() && p.iter().all(|v| v.is_finite()) {
+                    // 0/0 is what an autopilot sends before it has a fix.
+                    let plausible = lat_deg.abs() <= 90.0
+                        && lon_deg.abs() <= 180.0
+                        && (lat_deg, lon_deg) != (0.0, 0.0);
+                    if plausible && t_s.is_finite() && p.iter().all(|v| v.is_finite()) {
                         track.positions.push((t_s, p));
                     } else {
                         bad += 1;

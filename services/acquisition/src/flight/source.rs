@@ -4,9 +4,9 @@
 //! left frame k and right frame k form a pair when their video times differ by less
 //! than half a frame period (otherwise the earlier frame is dropped, `unpaired_frames`).
 //! A frame's moment on its UAV's autopilot clock is `video time + time_offset_s`; its
-//! pose is the telemetry interpolated there ([`NavTrack::pose_at`]), never extrapolated
-//! over more than a frame period: a frame without a pose loses its pair
-//! (`no_pose_position`, `no_pose_attitude`). The pair's stream time is the left
+//! pose is the telemetry interpolated there ([`NavTrack::pose_at`]) between samples at
+//! most `max_telemetry_gap_s` apart, never extrapolated: a frame without a pose loses
+//! its pair (`no_pose_position`, `no_pose_attitude`). The pair's stream time is the left
 //! frame's video time.
 
 use super::meta::{is_url, FlightMeta};
@@ -62,7 +62,28 @@ impl FlightSource {
             }
             let log = meta.resolve(path, &u.telemetry);
             let bytes = std::fs::read(&log).map_err(|e| format!("{}: {e}", log.display()))?;
-            let (samples, c) = parse_tlog(&bytes);
+            let (all, c) = parse_tlog(&bytes);
+            let mut systems: Vec<u8> = all.iter().map(|(s, _)| *s).collect();
+            systems.sort_unstable();
+            systems.dedup();
+            let system = match (u.system_id, systems.as_slice()) {
+                (Some(id), _) => id,
+                (None, [one]) => *one,
+                (None, []) => 0,
+                (None, many) => {
+                    return Err(format!(
+                        "{}: navigation messages from systems {many:?}; set [uav.{}] \
+                         system_id",
+                        log.display(),
+                        uav.name()
+                    ))
+                }
+            };
+            let samples: Vec<_> = all
+                .into_iter()
+                .filter(|(s, _)| *s == system)
+                .map(|(_, sample)| sample)
+                .collect();
             let TlogCounts {
                 crc_errors,
                 resyncs,
@@ -204,51 +225,50 @@ impl FrameSource for FlightSource {
         Ok(())
     }
 
-    /// The next pair that has a pose for both frames; pairs without are dropped and
-    /// counted (the first logged), never handed on.
+    /// The next pair, with a pose for both frames; a pair without is counted (the
+    /// first logged) and returned as [`SourceError::Dropped`], so the service's loop
+    /// keeps checking for a stop while a long gap goes by.
     fn next_pair(
         &mut self,
         left: &mut [u8],
         right: &mut [u8],
         _stride: usize,
     ) -> Option<Result<PairInfo, SourceError>> {
-        let period = self.period_s();
-        loop {
-            let (tl, tr) = match self.next_frames(left, right)? {
-                Ok(t) => t,
-                Err(e) => return Some(Err(SourceError::Flight(e))),
-            };
-            let mut poses = [Default::default(); 2];
-            let mut missing = None;
-            for (uav, t) in [(Uav::Left, tl), (Uav::Right, tr)] {
-                let at = t + self.meta.uav(uav).time_offset_s;
-                match self.tracks[uav.index()].pose_at(at, period) {
-                    Ok(p) => poses[uav.index()] = p,
-                    Err(why) => missing = Some((uav, t, why)),
-                }
+        let (tl, tr) = match self.next_frames(left, right)? {
+            Ok(t) => t,
+            Err(e) => return Some(Err(SourceError::Flight(e))),
+        };
+        let mut poses = [Default::default(); 2];
+        let mut missing = None;
+        for (uav, t) in [(Uav::Left, tl), (Uav::Right, tr)] {
+            let at = t + self.meta.uav(uav).time_offset_s;
+            match self.tracks[uav.index()].pose_at(at, self.meta.max_telemetry_gap_s) {
+                Ok(p) => poses[uav.index()] = p,
+                Err(why) => missing = Some((uav, t, why)),
             }
-            let Some((uav, t, why)) = missing else {
-                return Some(Ok(PairInfo {
-                    t_s: tl,
-                    poses,
-                    truth: None,
-                }));
-            };
-            let name = match why {
-                NoPose::Position => "no_pose_position",
-                NoPose::Attitude => "no_pose_attitude",
-            };
-            if !self.warned.contains(&name) {
-                self.warned.push(name);
-                tracing::warn!(
-                    uav = uav.name(),
-                    video_time_s = t,
-                    "a frame without telemetry within a frame period ({why:?}): its pair is \
-                     dropped (counted as {name} from now on)"
-                );
-            }
-            self.count(name);
         }
+        let Some((uav, t, why)) = missing else {
+            return Some(Ok(PairInfo {
+                t_s: tl,
+                poses,
+                truth: None,
+            }));
+        };
+        let name = match why {
+            NoPose::Position => "no_pose_position",
+            NoPose::Attitude => "no_pose_attitude",
+        };
+        if !self.warned.contains(&name) {
+            self.warned.push(name);
+            tracing::warn!(
+                uav = uav.name(),
+                video_time_s = t,
+                "a frame in a telemetry gap ({why:?}): its pair is dropped (counted as \
+                 {name} from now on)"
+            );
+        }
+        self.count(name);
+        Some(Err(SourceError::Dropped))
     }
 
     fn take_counts(&mut self) -> Vec<(&'static str, u64)> {

@@ -13,7 +13,7 @@
 use mavlink::dialects::common::{
     MavMessage, ATTITUDE_DATA, GLOBAL_POSITION_INT_DATA, GPS_RAW_INT_DATA,
 };
-use mavlink::{MavHeader, MavlinkReader, MavlinkVersion};
+use mavlink::{MavHeader, MavlinkReader, MavlinkVersion, Message};
 use std::io::Write;
 
 const MAGIC_V1: u8 = 0xfe;
@@ -101,7 +101,9 @@ fn sample(msg: &MavMessage) -> Option<NavSample> {
             alt,
             fix_type,
             ..
-        }) if (*fix_type as u32) >= 3 => Some(NavSample::Position {
+        // time_usec may be Unix time (the spec allows either): only a boot-clock time
+        // lines up with ATTITUDE's.
+        }) if (*fix_type as u32) >= 3 && *time_usec < 1_000_000_000_000_000 => Some(NavSample::Position {
             t_s: *time_usec as f64 / 1e6,
             lat_deg: *lat as f64 / 1e7,
             lon_deg: *lon as f64 / 1e7,
@@ -112,15 +114,50 @@ fn sample(msg: &MavMessage) -> Option<NavSample> {
     }
 }
 
-/// Decodes one MAVLink frame (exactly `frame`'s bytes).
-pub fn decode_frame(frame: &[u8]) -> Option<MavMessage> {
-    let mut reader = MavlinkReader::new(frame);
-    reader.read_any_message::<MavMessage>().ok().map(|(_, m)| m)
+/// The message ids dualgeo reads (others are skipped by their length, undecoded: the
+/// common dialect does not know every autopilot's messages, and an unknown id is not
+/// damage).
+const GPS_RAW_INT_ID: u32 = 24;
+const ATTITUDE_ID: u32 = 30;
+const GLOBAL_POSITION_INT_ID: u32 = 33;
+
+/// (message id, sending system, sequence) from a frame's header.
+fn header_fields(frame: &[u8]) -> Option<(u32, u8, u8)> {
+    match *frame.first()? {
+        MAGIC_V1 => Some((*frame.get(5)? as u32, *frame.get(3)?, *frame.get(2)?)),
+        MAGIC_V2 => {
+            let id = u32::from_le_bytes([*frame.get(7)?, *frame.get(8)?, *frame.get(9)?, 0]);
+            Some((id, *frame.get(5)?, *frame.get(4)?))
+        }
+        _ => None,
+    }
 }
 
-/// Every sample of a tlog's bytes, in file order, with what was skipped. GPS_RAW_INT
-/// positions are kept only when the log has no GLOBAL_POSITION_INT.
-pub fn parse_tlog(bytes: &[u8]) -> (Vec<NavSample>, TlogCounts) {
+/// Decodes one MAVLink frame (exactly `frame`'s bytes), CRC checked. `None` also when
+/// the frame the reader found is not the one at `frame[0]` (a chance magic byte: the
+/// reader would scan on and return a later frame).
+pub fn decode_frame(frame: &[u8]) -> Option<MavMessage> {
+    let (id, _, seq) = header_fields(frame)?;
+    let version = if frame[0] == MAGIC_V2 {
+        MavlinkVersion::V2
+    } else {
+        MavlinkVersion::V1
+    };
+    let mut reader = MavlinkReader::new(frame);
+    let raw = reader.read_any_raw_message::<MavMessage>().ok()?;
+    let own = raw.message_id() == id
+        && raw.sequence() == seq
+        && raw.payload().len() == *frame.get(1)? as usize;
+    if !own {
+        return None;
+    }
+    MavMessage::parse(version, id, raw.payload()).ok()
+}
+
+/// Every sample of a tlog's bytes with its sending system, in file order, and what was
+/// skipped. GPS_RAW_INT positions are kept only when the log has no
+/// GLOBAL_POSITION_INT.
+pub fn parse_tlog(bytes: &[u8]) -> (Vec<(u8, NavSample)>, TlogCounts) {
     let mut counts = TlogCounts::default();
     let mut samples = Vec::new();
     let mut at = 0usize;
@@ -149,12 +186,27 @@ pub fn parse_tlog(bytes: &[u8]) -> (Vec<NavSample>, TlogCounts) {
             at += 1;
             continue;
         }
+        let Some((id, system, _)) = header_fields(frame) else {
+            at += 1;
+            continue;
+        };
+        if !matches!(id, GPS_RAW_INT_ID | ATTITUDE_ID | GLOBAL_POSITION_INT_ID) {
+            if in_sync {
+                // Another message: skipped by its length, unchecked.
+                counts.frames += 1;
+                counts.other += 1;
+                at += 8 + len;
+            } else {
+                at += 1;
+            }
+            continue;
+        }
         match decode_frame(&frame[..len]) {
             Some(msg) => {
                 in_sync = true;
                 counts.frames += 1;
                 match sample(&msg) {
-                    Some(s) => samples.push(s),
+                    Some(s) => samples.push((system, s)),
                     None => counts.other += 1,
                 }
                 at += 8 + len;
@@ -169,7 +221,7 @@ pub fn parse_tlog(bytes: &[u8]) -> (Vec<NavSample>, TlogCounts) {
             None => at += 1,
         }
     }
-    let has_global = samples.iter().any(|s| {
+    let has_global = samples.iter().any(|(_, s)| {
         matches!(
             s,
             NavSample::Position {
@@ -179,7 +231,7 @@ pub fn parse_tlog(bytes: &[u8]) -> (Vec<NavSample>, TlogCounts) {
         )
     });
     if has_global {
-        samples.retain(|s| {
+        samples.retain(|(_, s)| {
             !matches!(
                 s,
                 NavSample::Position {
@@ -272,6 +324,8 @@ mod tests {
             }
         );
         assert_eq!(samples.len(), 10);
+        assert!(samples.iter().all(|(system, _)| *system == 1));
+        let samples: Vec<NavSample> = samples.into_iter().map(|(_, s)| s).collect();
         assert_eq!(
             samples[2],
             NavSample::Attitude {
@@ -310,6 +364,24 @@ mod tests {
         let (samples, counts) = parse_tlog(&bytes);
         assert_eq!(samples.len(), 8);
         assert!(counts.resyncs >= 1);
+    }
+
+    #[test]
+    fn messages_dualgeo_does_not_read_are_skipped_not_damage() {
+        let mut w = TlogWriter::new(Vec::new(), 1);
+        let heartbeat = MavMessage::HEARTBEAT(Default::default());
+        w.write(1, &heartbeat).unwrap();
+        w.write(2, &attitude(0)).unwrap();
+        let mut bytes = w.into_inner();
+        // An id the common dialect does not know (an autopilot's own message).
+        let mut unknown = vec![0u8; 8];
+        unknown.extend_from_slice(&[
+            MAGIC_V2, 2, 0, 0, 7, 1, 1, 0x10, 0x27, 0, 0xaa, 0xbb, 0x12, 0x34,
+        ]);
+        bytes.extend_from_slice(&unknown);
+        let (samples, counts) = parse_tlog(&bytes);
+        assert_eq!(samples.len(), 1);
+        assert_eq!((counts.other, counts.crc_errors, counts.resyncs), (2, 0, 0));
     }
 
     #[test]

@@ -1,7 +1,8 @@
 //! Video in and out through OpenCV's videoio (Debian's libopencv-videoio, FFmpeg back
 //! end). Reading decodes into OpenCV's own frame and copies it once into the
 //! destination (the loaned shared-memory sample): videoio cannot decode into a
-//! caller's buffer. The copy is timed in acquisition's `decode` histogram.
+//! caller's buffer. The copy is timed with the decode in acquisition's `produce`
+//! histogram.
 
 use opencv::core as cv;
 use opencv::prelude::*;
@@ -93,7 +94,8 @@ impl VideoReader {
         let t = if pts.is_finite() && pts > self.last_t {
             pts
         } else {
-            index as f64 / self.frame_rate_hz
+            // No usable timestamp: the frame index, but never back in time.
+            (index as f64 / self.frame_rate_hz).max(self.last_t + 1.0 / self.frame_rate_hz)
         };
         self.last_t = t;
         Some(Ok(t))

@@ -94,6 +94,7 @@ impl FlightWriter {
             video: videos[u.index()].file_name.clone(),
             telemetry: format!("{}.tlog", u.name()),
             time_offset_s: BOOT_OFFSET_S,
+            system_id: Some(u.index() as u8 + 1),
             camera,
         };
         let meta = FlightMeta {
@@ -103,6 +104,7 @@ impl FlightWriter {
             frame_rate_hz,
             truth: Some("truth.csv".into()),
             geoid_height_m: 0.0,
+            max_telemetry_gap_s: 0.5,
             origin,
             uav: FlightUavPair {
                 left: uav(Uav::Left),
@@ -121,7 +123,7 @@ impl FlightWriter {
         })
     }
 
-    /// The video codec used (`h264` or `mpeg4`).
+    /// The video codec used (`h264`, `mpeg4` or `ffv1`).
     pub fn codec(&self) -> &'static str {
         self.videos[0].codec
     }

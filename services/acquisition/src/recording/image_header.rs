@@ -50,6 +50,13 @@ fn jpeg_size(bytes: &[u8]) -> Result<(u32, u32), String> {
             // Standalone markers: no length field.
             0x01 | 0xd0..=0xd7 => continue,
             0xda | 0xd9 => return Err("JPEG data before its frame header (SOF)".into()),
+            // Not a marker (a stuffed 0x00, or a reserved code): libjpeg would skip
+            // these and scan on, possibly to another SOF than the one found here.
+            0x00 | 0x02..=0xbf => {
+                return Err(format!(
+                    "JPEG byte 0xff 0x{marker:02x} where a marker should be"
+                ))
+            }
             _ => {}
         }
         let Some(length) = be_u16(bytes, at) else {
@@ -110,5 +117,8 @@ mod tests {
         assert!(declared_size(&[0xff, 0xd8, 0xff, 0xda, 0, 2]).is_err());
         // A zero-length segment must not loop forever.
         assert!(declared_size(&[0xff, 0xd8, 0xff, 0xe0, 0, 0]).is_err());
+        // A stuffed byte where a marker should be: libjpeg would scan past it to a
+        // SOF this parser never saw, so it is refused.
+        assert!(declared_size(&[0xff, 0xd8, 0xff, 0x00, 0, 4, 0xff, 0xc0]).is_err());
     }
 }

@@ -2,7 +2,8 @@
 //!
 //! 1. Starts detection, matching and geolocation, and waits until every one of them is
 //!    connected (subscribers and listeners counted through iceoryx2).
-//! 2. Starts acquisition, which streams the live simulator (default) or a recording.
+//! 2. Starts acquisition, which streams the live simulator (default), a recording or a
+//!    flight (videos + MAVLink logs, docs/flight-io.md).
 //! 3. Collects the estimates (event-driven: a WaitSet on its wake listener, with a
 //!    100 ms tick for the progress bar and to watch the children).
 //! 4. Restarts a service that dies (`restart.rs`; `--restart never` ends the run
@@ -14,6 +15,9 @@
 //!    writes the outputs (`outputs.rs`). A service that fails to start, or dies more
 //!    often than the policy allows, ends the run with its name, its exit status and a
 //!    non-zero exit.
+//!
+//! Valid estimates also go out live as they arrive: MAVLink and Cursor-on-Target
+//! (`live_out/`, `--mavlink-out`, `--cot-out`).
 
 mod accuracy;
 mod children;
@@ -35,7 +39,7 @@ use std::time::Duration;
 
 #[derive(Debug, clap::Args)]
 pub struct RunArgs {
-    /// `sim` (the live simulator) or a recording directory.
+    /// `sim` (the live simulator), a recording directory, or a flight's flight.toml.
     #[arg(long, default_value = "sim")]
     pub source: String,
     /// The simulated scenario (with `--source sim`).
@@ -116,7 +120,8 @@ pub fn run(args: &RunArgs) -> Result<()> {
     }
     // Before any process starts: a bad address or a missing origin is refused here.
     let (_, _, origin) = outputs::source_facts(args, Path::new(""))?;
-    let live = live_out::LiveOutputs::open(&args.live_out, origin)?;
+    let live =
+        live_out::LiveOutputs::open(&args.live_out, origin, outputs::source_geoid_height(args)?)?;
     let out = &args.out;
     std::fs::create_dir_all(out).with_context(|| format!("create {}", out.display()))?;
     if !(args.sample_every_s.is_finite() && args.sample_every_s >= 0.1) {

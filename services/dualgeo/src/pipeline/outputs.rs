@@ -133,6 +133,15 @@ pub(super) fn source_facts(
     }
 }
 
+/// The geoid height a source states (a flight's `geoid_height_m`), 0 for the others.
+pub(super) fn source_geoid_height(args: &RunArgs) -> Result<f64> {
+    if args.source.ends_with(".toml") {
+        let meta = FlightMeta::read(Path::new(&args.source)).map_err(anyhow::Error::msg)?;
+        return Ok(meta.geoid_height_m);
+    }
+    Ok(0.0)
+}
+
 fn frames_dropped(g: &Gathered) -> u64 {
     super::latency::frames_dropped_of(|stage, name| g.counter(stage, name))
 }

@@ -162,7 +162,9 @@ fn header(uav: Uav, k: u64, width: u32, height: u32) -> FrameHeader {
         height,
         stride: width * 3,
         pose: PoseSample {
-            x_m: k as f64 * 12.0,
+            // 40 m and 0.5 s apart: past the baseline constraint, so each pair becomes
+            // a keyframe and later pairs are matched against it.
+            x_m: k as f64 * 40.0,
             y_m: uav.index() as f64 * 70.0,
             z_m: 100.0,
             ..Default::default()
@@ -177,9 +179,10 @@ fn frames_seed(pairs: u64) -> Vec<u8> {
     for k in 0..pairs {
         for uav in [Uav::Left, Uav::Right] {
             out.push(uav.index() as u8);
-            out.extend(message_bytes(&header(uav, k, 128, 96)));
+            out.extend(message_bytes(&header(uav, k, 320, 240)));
             out.push(1); // a texture of the header's size
-            out.extend(k.to_le_bytes()); // the same texture seed for both UAVs
+                         // One texture for every frame: past images share features with the current.
+            out.extend(7u64.to_le_bytes());
         }
         for uav in [Uav::Left, Uav::Right] {
             out.push(2);
@@ -188,8 +191,8 @@ fn frames_seed(pairs: u64) -> Vec<u8> {
                 t_s: k as f64 / 2.0,
                 uav: uav.index() as u8,
                 found: 1,
-                centre: [64.0, 48.0],
-                bbox: [60.0, 44.0, 8.0, 8.0],
+                centre: [160.0, 120.0],
+                bbox: [156.0, 116.0, 8.0, 8.0],
                 confidence: 0.9,
                 ..Default::default()
             }));
@@ -226,7 +229,7 @@ fn observation_sets(n: usize) -> Vec<ObservationSetMsg> {
 }
 
 fn message_seeds(dir: &Path) {
-    write(dir, "frames", "three-pairs", &frames_seed(3));
+    write(dir, "frames", "five-pairs", &frames_seed(5));
     for (method, name) in [(0u8, "temporal"), (1, "paper"), (2, "joint")] {
         let mut data = vec![method];
         for set in observation_sets(4) {

@@ -30,7 +30,7 @@ fn deg_e7(deg: f64) -> Option<i32> {
 
 impl MavlinkOut {
     /// `address` is `udpout:HOST:PORT` (the address syntax of MAVLink tools).
-    pub fn open(address: &str, args: &LiveOutArgs) -> Result<Self> {
+    pub fn open(address: &str, args: &LiveOutArgs, geoid_height_m: f64) -> Result<Self> {
         let Some(host_port) = address.strip_prefix("udpout:") else {
             bail!("--mavlink-out {address:?}: expected udpout:HOST:PORT");
         };
@@ -38,7 +38,7 @@ impl MavlinkOut {
             udp: UdpSender::open(host_port, "--mavlink-out", "mavlink")?,
             system_id: args.mavlink_system_id,
             component_id: args.mavlink_component_id,
-            geoid_height_m: args.geoid_height_m,
+            geoid_height_m,
             sequence: 0,
             buf: Vec::with_capacity(300),
         })

@@ -36,9 +36,10 @@ pub struct LiveOutArgs {
     #[arg(long, default_value_t = 100)]
     pub mavlink_component_id: u8,
     /// Geoid height N (m) at the origin: MAVLink's altitude is AMSL = ellipsoidal − N.
-    /// dualgeo carries no geoid model, so the default 0 sends the ellipsoidal height.
-    #[arg(long, default_value_t = 0.0)]
-    pub geoid_height_m: f64,
+    /// Default: a flight's `geoid_height_m`, else 0 (dualgeo carries no geoid model, so
+    /// then the ellipsoidal height is sent).
+    #[arg(long)]
+    pub geoid_height_m: Option<f64>,
     /// Send a Cursor-on-Target event per estimate to this address, e.g.
     /// udp://239.2.3.1:6969 (TAK's SA multicast) or udp://127.0.0.1:4242.
     #[arg(long, value_name = "udp://HOST:PORT")]
@@ -102,7 +103,9 @@ pub struct LiveOutputs {
 
 impl LiveOutputs {
     /// Opens the sockets; refuses a bad address, or an output without an origin.
-    pub fn open(args: &LiveOutArgs, origin: Option<Origin>) -> Result<Self> {
+    /// `source_geoid_m` is the source's own geoid height (a flight's), used unless
+    /// `--geoid-height-m` is given.
+    pub fn open(args: &LiveOutArgs, origin: Option<Origin>, source_geoid_m: f64) -> Result<Self> {
         let wanted = args.mavlink_out.is_some() || args.cot_out.is_some();
         if wanted && origin.is_none() {
             bail!(
@@ -110,10 +113,12 @@ impl LiveOutputs {
                  no geodetic origin (add an [origin] section to its recording.toml)"
             );
         }
-        if !(args.cot_stale_s.is_finite() && args.cot_stale_s > 0.0) {
-            bail!("--cot-stale-s must be a positive number of seconds");
+        if !(args.cot_stale_s.is_finite() && args.cot_stale_s > 0.0 && args.cot_stale_s <= 86_400.0)
+        {
+            bail!("--cot-stale-s must be a number of seconds in (0, 86400]");
         }
-        if !args.geoid_height_m.is_finite() {
+        let geoid_height_m = args.geoid_height_m.unwrap_or(source_geoid_m);
+        if !geoid_height_m.is_finite() {
             bail!("--geoid-height-m must be finite");
         }
         Ok(Self {
@@ -121,7 +126,7 @@ impl LiveOutputs {
             mavlink: args
                 .mavlink_out
                 .as_deref()
-                .map(|a| MavlinkOut::open(a, args))
+                .map(|a| MavlinkOut::open(a, args, geoid_height_m))
                 .transpose()?,
             cot: args
                 .cot_out
