@@ -2,8 +2,8 @@
 //! live simulator, a recording or a flight ([`acquisition::source`]) into the frame
 //! services: each frame is rendered or decoded *directly into a loaned shared-memory
 //! sample* (the only write of its pixels; a flight's video frame is decoded by OpenCV
-//! and copied once, docs/flight-io.md),
-//! stamped, sent, and the detection and matching stages are woken.
+//! and copied once, docs/flight-io.md), stamped, sent, and the detection and matching
+//! stages are woken.
 //!
 //! Acquisition never blocks: when no sample can be loaned (every buffer in use), the pair
 //! is dropped and counted (`pairs_dropped`). A corrupt image in a recording is logged
@@ -60,7 +60,7 @@ use std::time::Duration;
 struct Args {
     #[command(flatten)]
     service: ServiceArgs,
-    /// `sim` (the live simulator) or a recording directory.
+    /// `sim` (the live simulator), a recording directory, or a flight's flight.toml.
     #[arg(long, default_value = "sim")]
     source: String,
     /// The simulated scenario (with `--source sim`).
