@@ -142,6 +142,9 @@ fn main() -> Result<()> {
     if let Some(p) = resumed {
         let t0 = monotonic_ns();
         source.skip(p.consumed);
+        // What the source counted on opening (a flight's damaged log records) was
+        // counted by the first incarnation already; the merged statistics keep it once.
+        drop(source.take_counts());
         stats.record("resume", elapsed_us(t0, monotonic_ns()));
         stats.count("resumed", 1);
         tracing::info!(
