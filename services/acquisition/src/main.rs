@@ -42,7 +42,7 @@ use acquisition::recording::{StreamLog, TelemetryRow, TruthRow};
 use acquisition::resume::StreamPosition;
 use acquisition::sim::faults::FaultInjector;
 use acquisition::sim::ScenarioArgs;
-use acquisition::source::SourceError;
+use acquisition::source::{FrameSource, SourceError};
 use anyhow::{bail, Context, Result};
 use clap::Parser;
 use iceoryx2::prelude::EventId;
@@ -96,6 +96,15 @@ fn parse_rate(s: &str) -> Result<Rate> {
             Ok(hz) if hz.is_finite() && hz > 0.0 => Ok(Rate::Hz(hz)),
             _ => bail!("--rate must be realtime, max or a positive number of Hz, got {other:?}"),
         },
+    }
+}
+
+/// Adds what the source counted since the last call to `stats`, as `source.<name>`.
+fn count_source(source: &mut dyn FrameSource, stats: &mut StageStats) {
+    for (name, n) in source.take_counts() {
+        if n > 0 {
+            stats.count(&format!("source.{name}"), n);
+        }
     }
 }
 
@@ -248,9 +257,7 @@ fn main() -> Result<()> {
             }
             Some(Err(SourceError::Dropped)) => {
                 position.consumed = source.consumed();
-                for (name, n) in source.take_counts() {
-                    stats.count(&format!("source.{name}"), n);
-                }
+                count_source(source.as_mut(), &mut stats);
                 continue;
             }
             Some(Err(e)) => {
@@ -262,11 +269,7 @@ fn main() -> Result<()> {
             Some(Ok(info)) => info,
         };
         position.consumed = source.consumed();
-        for (name, n) in source.take_counts() {
-            if n > 0 {
-                stats.count(&format!("source.{name}"), n);
-            }
-        }
+        count_source(source.as_mut(), &mut stats);
         // The gate sees the stream's clock (a loop goes on forward), as a live source's.
         let mut delivered = info.poses.map(|pose| LiveSample {
             t_s: info.t_s + t_offset,
@@ -383,11 +386,7 @@ fn main() -> Result<()> {
         seq += 1;
         saver.tick(&stats);
     }
-    for (name, n) in source.take_counts() {
-        if n > 0 {
-            stats.count(&format!("source.{name}"), n);
-        }
-    }
+    count_source(source.as_mut(), &mut stats);
     if let Some(log) = log {
         log.finish()?;
     }

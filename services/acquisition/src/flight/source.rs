@@ -49,6 +49,7 @@ impl FlightSource {
     pub fn open(path: &Path) -> Result<Self, String> {
         let meta = FlightMeta::read(path)?;
         let mut counts = Vec::new();
+        let videos = open_videos(path, &meta)?;
         let mut tracks = [NavTrack::default(), NavTrack::default()];
         for uav in [Uav::Left, Uav::Right] {
             let u = meta.uav(uav);
@@ -110,11 +111,10 @@ impl FlightSource {
                 ));
             };
             tracks[uav.index()] = track;
-            let video = meta.resolve(path, &u.video);
-            if !is_url(&u.video) {
-                let frames = frame_count(&video).unwrap_or(0.0);
+            // A stream has no frame count: nothing to check before it plays.
+            if let Some(frames) = videos[uav.index()].frame_count() {
                 let video_end = u.time_offset_s + frames / meta.frame_rate_hz;
-                if frames > 0.0 && (video_end < start || u.time_offset_s > end) {
+                if video_end < start || u.time_offset_s > end {
                     return Err(format!(
                         "[uav.{}] time_offset_s = {}: the video covers {:.3}–{:.3} s on the \
                          autopilot clock, the telemetry {start:.3}–{end:.3} s: no overlap",
@@ -126,7 +126,6 @@ impl FlightSource {
                 }
             }
         }
-        let videos = open_videos(path, &meta)?;
         Ok(Self {
             path: path.to_path_buf(),
             meta,
@@ -173,16 +172,6 @@ impl FlightSource {
         }
         Some(Ok((tl, tr)))
     }
-}
-
-/// Frames in a video file, from its container (0 when unknown).
-fn frame_count(video: &Path) -> Option<f64> {
-    use opencv::prelude::*;
-    use opencv::videoio;
-    let cap = videoio::VideoCapture::from_file(video, videoio::CAP_FFMPEG).ok()?;
-    cap.get(videoio::CAP_PROP_FRAME_COUNT)
-        .ok()
-        .filter(|n| n.is_finite() && *n > 0.0)
 }
 
 impl FrameSource for FlightSource {

@@ -101,6 +101,14 @@ impl VideoReader {
         Some(Ok(t))
     }
 
+    /// Frames in the container, when it says (a file; a stream does not).
+    pub fn frame_count(&self) -> Option<f64> {
+        self.cap
+            .get(videoio::CAP_PROP_FRAME_COUNT)
+            .ok()
+            .filter(|n| n.is_finite() && *n > 0.0)
+    }
+
     /// Skips one frame without converting it; false at the end.
     pub fn skip(&mut self) -> bool {
         self.decoded += 1;

@@ -58,10 +58,7 @@ impl MavlinkOut {
             return false;
         }
         self.sequence = self.sequence.wrapping_add(1);
-        let buf = std::mem::take(&mut self.buf);
-        let sent = self.udp.send(&buf, stats);
-        self.buf = buf;
-        sent
+        self.udp.send(&self.buf, stats)
     }
 
     pub fn send_fix(&mut self, fix: &TargetFix, stats: &mut StageStats) {
