@@ -1,7 +1,8 @@
 //! Issue #14: the target goes out as MAVLink and Cursor-on-Target, and clients nobody
 //! here wrote decode every message: pymavlink (from PyPI, in target/pyenv, installed by
 //! scripts/py_test_env.sh) and Python's XML parser (tests/clients/listen.py). A short
-//! live-simulator run; each decoded position must match track.csv row for row.
+//! live-simulator run; each decoded position must match track.csv row for row. The
+//! `--mcap` recording is read back by Foxglove's `mcap` package (tests/clients/read_mcap.py).
 
 #[path = "support/scratch.rs"]
 mod scratch;
@@ -172,6 +173,7 @@ fn an_output_address_that_is_wrong_is_refused_before_anything_starts() {
             "udpout:no-such-host.invalid:1",
             "cannot resolve",
         ),
+        ("--mcap", "/no/such/dir/run.mcap", "no directory"),
     ] {
         let o = Command::new(env!("CARGO_BIN_EXE_dualgeo"))
             .args(["run", "--duration-s", "1", "--out"])
@@ -186,4 +188,118 @@ fn an_output_address_that_is_wrong_is_refused_before_anything_starts() {
         assert!(stderr.contains(says), "{flag} {value}: {stderr}");
         assert!(!dir.0.join("out/track.csv").exists(), "something started");
     }
+}
+
+#[test]
+fn the_mcap_recording_is_read_back_by_the_mcap_reader() {
+    let python = match python() {
+        Ok(p) => p,
+        Err(e) => {
+            eprintln!("SKIPPED: the mcap package could not be installed from PyPI: {e}");
+            return;
+        }
+    };
+    let dir = Scratch::new("mcap-out");
+    let out = dir.0.join("out");
+    let file = dir.0.join("run.mcap");
+    let run = Command::new(env!("CARGO_BIN_EXE_dualgeo"))
+        .args([
+            "run",
+            "--duration-s",
+            "5",
+            "--mcap-image-every",
+            "2",
+            "--out",
+        ])
+        .arg(&out)
+        .arg("--mcap")
+        .arg(&file)
+        .output()
+        .expect("run dualgeo");
+    assert!(
+        run.status.success(),
+        "{}\n{}",
+        String::from_utf8_lossy(&run.stdout),
+        String::from_utf8_lossy(&run.stderr)
+    );
+    let read = Command::new(&python)
+        .arg(root().join("tests/clients/read_mcap.py"))
+        .arg(&file)
+        .output()
+        .expect("run the reader");
+    assert!(
+        read.status.success(),
+        "{}",
+        String::from_utf8_lossy(&read.stderr)
+    );
+    let report: Value = serde_json::from_slice(&read.stdout).expect("the reader's JSON");
+    let counters: Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("counters.json")).unwrap()).unwrap();
+    let counter = |name: &str| counters[name].as_u64().unwrap_or(0);
+
+    let expected = [
+        ("/left/image", "foxglove.CompressedImage"),
+        ("/right/image", "foxglove.CompressedImage"),
+        ("/left/pose", "foxglove.PoseInFrame"),
+        ("/right/pose", "foxglove.PoseInFrame"),
+        ("/left/detection", "foxglove.ImageAnnotations"),
+        ("/right/detection", "foxglove.ImageAnnotations"),
+        ("/target/fix", "foxglove.LocationFix"),
+        ("/target/pose", "foxglove.PoseInFrame"),
+        ("/latency", "dualgeo.StageLatency"),
+    ];
+    let channels = report["channels"].as_object().expect("channels");
+    assert_eq!(channels.len(), expected.len(), "{channels:?}");
+    for (topic, schema) in expected {
+        let c = &channels[topic];
+        assert_eq!(c["schema"], schema, "{topic}");
+        assert_eq!(c["schema_encoding"], "jsonschema", "{topic}");
+        assert_eq!(c["message_encoding"], "json", "{topic}");
+        assert_eq!(
+            c["read"], c["summary_count"],
+            "{topic}: read back vs summary"
+        );
+        let n = c["read"].as_u64().unwrap();
+        assert!(n > 0, "{topic} is empty");
+        let key = format!("supervisor.mcap{}", topic.replace('/', "."));
+        assert_eq!(n, counter(&key), "{topic}: in the file vs counted");
+    }
+    assert_eq!(report["bad_json"], 0);
+    assert_eq!(report["bad_images"], 0);
+
+    // Every frame the recorder saw has its pose and its detection; every second one its
+    // image (sequence numbers start at 0); frames it missed are counted.
+    let n = |topic: &str| channels[topic]["read"].as_u64().unwrap();
+    let lost = counter("supervisor.mcap.frames_lost");
+    assert_eq!(
+        n("/left/pose") + n("/right/pose") + lost,
+        counter("acquisition.frames_in"),
+        "frames: recorded + lost = streamed"
+    );
+    for uav in ["left", "right"] {
+        let poses = n(&format!("/{uav}/pose"));
+        assert_eq!(n(&format!("/{uav}/detection")), poses, "{uav}");
+        let images = n(&format!("/{uav}/image"));
+        assert!(
+            images.abs_diff(poses.div_ceil(2)) <= lost,
+            "{uav}: {images} images of {poses} frames"
+        );
+    }
+
+    // The target: one fix per track.csv row, at its position; a latency record per
+    // estimate message whose stages add up to its end-to-end time.
+    let rows = track(&out.join("track.csv"));
+    let fixes = report["fixes"].as_array().expect("fixes");
+    assert!(rows.len() > 30, "only {} estimates", rows.len());
+    assert_eq!(fixes.len(), rows.len());
+    for (f, row) in fixes.iter().zip(&rows) {
+        for (i, tol) in [(0, 2e-7), (1, 2e-7), (2, 0.01)] {
+            assert!(
+                (f[i].as_f64().unwrap() - row[i]).abs() < tol,
+                "{f} vs {row:?}"
+            );
+        }
+    }
+    assert!(n("/latency") >= n("/target/fix"));
+    assert!(report["latency_sum_error_ms"].as_f64().unwrap() < 1e-3);
 }

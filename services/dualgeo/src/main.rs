@@ -33,7 +33,7 @@ struct Cli {
 enum Command {
     /// Run the pipeline (four processes over shared memory) on the live simulator or a
     /// recording; prints the latency table and accuracy, writes track, report and plots.
-    Run(pipeline::RunArgs),
+    Run(Box<pipeline::RunArgs>),
     /// The paper's experiments (Tables 1–4, Figures 8–12) on the simulator, beside the
     /// paper's numbers; writes docs/evaluation.md and its plots.
     Evaluate(evaluate::EvaluateArgs),

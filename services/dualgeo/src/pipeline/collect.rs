@@ -40,6 +40,9 @@ pub struct Sinks {
 
 pub struct Collector {
     endpoint: Endpoint,
+    /// Subscribers of the supervisor's own on each data service (the `--mcap` recorder),
+    /// over the services' own.
+    monitors: usize,
     estimates: MsgSubscriber<EstimateMsg>,
     listener: Listener<Ipc>,
 }
@@ -73,12 +76,13 @@ fn admissible(msg: &EstimateMsg, last_t_s: Option<f64>, stats: &mut StageStats) 
 }
 
 impl Collector {
-    pub fn new(run_id: &str) -> Result<Self> {
+    pub fn new(run_id: &str, monitors: usize) -> Result<Self> {
         let endpoint = Endpoint::new(run_id, "supervisor")?;
         let estimates = endpoint.subscriber::<EstimateMsg>(Topic::Estimates)?;
         let listener = endpoint.listener(Stage::Supervisor)?;
         Ok(Self {
             endpoint,
+            monitors,
             estimates,
             listener,
         })
@@ -86,10 +90,11 @@ impl Collector {
 
     fn connected(&self) -> Result<bool> {
         let e = &self.endpoint;
-        Ok(e.frame_subscriber_count(Uav::Left)? >= 2
-            && e.frame_subscriber_count(Uav::Right)? >= 2
-            && e.subscriber_count::<DetectionMsg>(Topic::Detections)? >= 1
-            && e.subscriber_count::<ObservationSetMsg>(Topic::Observations)? >= 1
+        let m = self.monitors;
+        Ok(e.frame_subscriber_count(Uav::Left)? >= 2 + m
+            && e.frame_subscriber_count(Uav::Right)? >= 2 + m
+            && e.subscriber_count::<DetectionMsg>(Topic::Detections)? > m
+            && e.subscriber_count::<ObservationSetMsg>(Topic::Observations)? > m
             && e.listener_count(Stage::Detection)? >= 1
             && e.listener_count(Stage::Matching)? >= 1
             && e.listener_count(Stage::Geolocation)? >= 1)

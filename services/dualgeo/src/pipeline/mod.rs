@@ -17,13 +17,15 @@
 //!    non-zero exit.
 //!
 //! Valid estimates also go out live as they arrive: MAVLink and Cursor-on-Target
-//! (`live_out/`, `--mavlink-out`, `--cot-out`).
+//! (`live_out/`, `--mavlink-out`, `--cot-out`); `--mcap` records the run for Foxglove
+//! (`mcap_out/`).
 
 mod accuracy;
 mod children;
 mod collect;
 mod latency;
 mod live_out;
+mod mcap_out;
 mod outputs;
 pub(crate) mod plots;
 mod restart;
@@ -68,6 +70,8 @@ pub struct RunArgs {
     pub restart: restart::RestartArgs,
     #[command(flatten)]
     pub live_out: live_out::LiveOutArgs,
+    #[command(flatten)]
+    pub mcap: mcap_out::McapArgs,
     /// Soak report: sample every process's memory and descriptors and the stages'
     /// latency this often (soak.csv, soak.png and a flatness verdict).
     #[arg(long, default_value_t = 60.0)]
@@ -173,7 +177,10 @@ pub fn run(args: &RunArgs) -> Result<()> {
         out.display()
     );
 
-    let collector = collect::Collector::new(&run_id)?;
+    // The recorder subscribes first, so that it sees the stream from its first frame.
+    let recording = mcap_out::McapRecording::start(&args.mcap, &run_id, origin)?;
+    let collector =
+        collect::Collector::new(&run_id, mcap_out::McapRecording::subscribers(&recording))?;
     let mut services: Vec<Service> = Vec::new();
     let started = (|| -> Result<()> {
         for name in ["geolocation", "matching", "detection"] {
@@ -199,6 +206,9 @@ pub fn run(args: &RunArgs) -> Result<()> {
         Ok(())
     })();
     if let Err(e) = started {
+        if let Some(r) = recording {
+            let _ = r.finish(&mut shared_types::stats::StageStats::new("supervisor"));
+        }
         let failures = children::stop_all(&mut services, Duration::from_secs(5));
         for f in failures {
             eprintln!("  {f}");
@@ -221,8 +231,11 @@ pub fn run(args: &RunArgs) -> Result<()> {
         collect::Sinks { track, live },
         sampler,
     );
+    // Before the services stop: the recorder takes what is still queued.
+    let mut mcap_stats = shared_types::stats::StageStats::new("supervisor");
+    let recorded = recording.map(|r| r.finish(&mut mcap_stats));
     let failures = children::stop_all(&mut services, Duration::from_secs(10));
-    let collected = match outcome {
+    let mut collected = match outcome {
         Ok(c) => c,
         Err(e) => {
             for f in &failures {
@@ -233,6 +246,10 @@ pub fn run(args: &RunArgs) -> Result<()> {
     };
     if !failures.is_empty() {
         bail!("services did not stop cleanly: {}", failures.join("; "));
+    }
+    if let Some(r) = recorded {
+        r?;
+        collected.stats.merge(&mcap_stats);
     }
     outputs::write_all(args, out, &stats_dir, &stream_dir, &collected)
 }
