@@ -9,6 +9,7 @@ packages=(
   libclang-dev
   pkg-config      # the opencv crate finds OpenCV through pkg-config
   fonts-dejavu-core  # text in the PNG plots (read at run time)
+  ffmpeg          # streams a flight's videos live over UDP in the live-flight test and bench
 )
 # pip fetches the scene suite's aerial photographs (scripts/fetch_aerial.sh).
 if ! { command -v python3 >/dev/null 2>&1 && python3 -m pip --version >/dev/null 2>&1; }; then

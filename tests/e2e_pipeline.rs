@@ -91,6 +91,7 @@ fn pipeline_on_a_recording_and_a_corrupt_image() {
     assert_eq!(
         keys(lat),
         [
+            "acquisition",
             "detection",
             "end_to_end",
             "geolocation",
@@ -99,6 +100,7 @@ fn pipeline_on_a_recording_and_a_corrupt_image() {
         ]
     );
     for row in [
+        "acquisition",
         "detection",
         "end_to_end",
         "geolocation",

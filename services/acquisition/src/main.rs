@@ -255,6 +255,10 @@ fn main() -> Result<()> {
                 }
                 break 'stream;
             }
+            Some(Err(SourceError::Waiting)) => {
+                count_source(source.as_mut(), &mut stats);
+                continue;
+            }
             Some(Err(SourceError::Dropped)) => {
                 position.consumed = source.consumed();
                 count_source(source.as_mut(), &mut stats);
@@ -297,8 +301,16 @@ fn main() -> Result<()> {
         if checked.is_err() {
             continue;
         }
-        let captured = monotonic_ns();
-        stats.record("produce", elapsed_us(produce_start, captured));
+        let produced = monotonic_ns();
+        // A live source's pair was captured when its frames arrived, not when it was
+        // handed over (waiting for its telemetry and the copy are on the clock).
+        let captured = info.captured_ns.unwrap_or(produced);
+        // The source's own time: from the call, or from the frames' moment when they
+        // arrived during it (a live source waits for its streams).
+        let source_start = info
+            .captured_ns
+            .map_or(produce_start, |c| c.max(produce_start));
+        stats.record("produce", elapsed_us(source_start, produced));
         let t_first_pair = *t_first.get_or_insert(info.t_s);
         last_t = info.t_s;
         let t_stream = info.t_s - t_first_pair + t_offset;

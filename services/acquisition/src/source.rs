@@ -3,7 +3,7 @@
 //! streams whatever [`open`] gives it; each source writes a pair's pixels straight into
 //! the two loaned shared-memory frames it is handed.
 
-use crate::flight::FlightSource;
+use crate::flight::{FlightSource, LiveFlightSource};
 use crate::recording::{decode_image_into, Recording, RecordingError, StereoPair, TruthRow};
 use crate::sim::{ScenarioArgs, SimConfig, SimError, Simulator};
 use shared_types::conventions::{Intrinsics, Uav};
@@ -24,6 +24,9 @@ pub enum SourceError {
     /// error to log, a reason to go on.
     #[error("pair dropped by the source")]
     Dropped,
+    /// A live source has no pair yet (asked again after a look for a stop request).
+    #[error("no pair yet")]
+    Waiting,
 }
 
 /// One pair's description, filled by the source.
@@ -34,6 +37,9 @@ pub struct PairInfo {
     pub poses: [PoseSample; 2],
     /// Truth, when the source knows it (the simulator): logged for evaluation only.
     pub truth: Option<[TruthRow; 2]>,
+    /// CLOCK_MONOTONIC when the pair was handed over, for a live source (the later of
+    /// its two decoded frames); `None`: when the source returned it.
+    pub captured_ns: Option<u64>,
 }
 
 pub trait FrameSource {
@@ -81,6 +87,12 @@ pub fn open(source: &str, scenario: &ScenarioArgs) -> Result<Box<dyn FrameSource
     }
     let path = Path::new(source);
     if path.is_file() && path.extension().is_some_and(|e| e == "toml") {
+        let meta = crate::flight::FlightMeta::read(path).map_err(SourceError::Flight)?;
+        if meta.is_live() {
+            return Ok(Box::new(
+                LiveFlightSource::open(meta).map_err(SourceError::Flight)?,
+            ));
+        }
         return Ok(Box::new(
             FlightSource::open(path).map_err(SourceError::Flight)?,
         ));
@@ -167,6 +179,7 @@ impl FrameSource for SimSource {
             t_s: step.frames[0].t_s,
             poses: [step.frames[0].measured, step.frames[1].measured],
             truth: Some(truth),
+            captured_ns: None,
         }))
     }
 }
@@ -257,6 +270,7 @@ impl FrameSource for RecordingSource {
                     rec.telemetry[pair.right].pose,
                 ],
                 truth: None,
+                captured_ns: None,
             })
         })();
         Some(result)

@@ -18,8 +18,11 @@
 //!
 //! [uav.left]
 //! video = "left.mp4"            # a file (relative to flight.toml) or a stream URL
-//! telemetry = "left.tlog"       # a .tlog file (live udpin: is not supported yet)
+//! telemetry = "left.tlog"       # a .tlog file, or udpin:HOST:PORT live (then the
+//!                               # video is a stream URL too)
 //! time_offset_s = 100.0         # autopilot clock (time_boot_ms) at video time 0
+//!                               # (recorded flights; live, the offset is measured)
+//! video_latency_s = 0.0         # live only: capture → decoded frame on the ground
 //! system_id = 1                 # optional: the autopilot's system id in the log
 //! [uav.left.camera]             # as recording.toml's camera
 //! width = 640
@@ -41,11 +44,19 @@ pub struct FlightUav {
     pub telemetry: String,
     #[serde(default)]
     pub time_offset_s: f64,
+    /// Live only: seconds from a frame's capture on the UAV to its decoded pixels on
+    /// the ground (encoder, radio, decoder), subtracted from its arrival time.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub video_latency_s: f64,
     /// The MAVLink system id of this UAV's autopilot in its log; needed only when the
     /// log holds navigation messages of more than one system.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub system_id: Option<u8>,
     pub camera: CameraMeta,
+}
+
+fn is_zero(v: &f64) -> bool {
+    *v == 0.0
 }
 
 fn default_max_telemetry_gap_s() -> f64 {
@@ -84,6 +95,11 @@ pub fn is_url(s: &str) -> bool {
 }
 
 impl FlightMeta {
+    /// Live flight: telemetry from `udpin:` (then both UAVs' videos are streams).
+    pub fn is_live(&self) -> bool {
+        self.uav.left.telemetry.starts_with("udpin:")
+    }
+
     pub fn uav(&self, uav: Uav) -> &FlightUav {
         match uav {
             Uav::Left => &self.uav.left,
@@ -148,6 +164,34 @@ impl FlightMeta {
             }
             if !u.time_offset_s.is_finite() {
                 return Err(format!("[uav.{name}] time_offset_s must be finite"));
+            }
+            let live = u.telemetry.starts_with("udpin:");
+            if live != self.is_live() {
+                return Err(
+                    "both UAVs' telemetry must be live (udpin:) or both .tlog files".into(),
+                );
+            }
+            if live && !is_url(&u.video) {
+                return Err(format!(
+                    "[uav.{name}] live telemetry needs a live video: a stream URL, not the \
+                     file {:?}",
+                    u.video
+                ));
+            }
+            if live && u.time_offset_s != 0.0 {
+                return Err(format!(
+                    "[uav.{name}] time_offset_s: a live flight measures the clock offset from \
+                     the telemetry; give video_latency_s instead"
+                ));
+            }
+            if !(u.video_latency_s.is_finite() && (0.0..=10.0).contains(&u.video_latency_s)) {
+                return Err(format!("[uav.{name}] video_latency_s must be in [0, 10] s"));
+            }
+            if !live && u.video_latency_s != 0.0 {
+                return Err(format!(
+                    "[uav.{name}] video_latency_s is for live flights; a recorded one is \
+                     aligned by time_offset_s"
+                ));
             }
             let c = &u.camera;
             let finite = [c.fx, c.fy, c.cx, c.cy]

@@ -1,8 +1,14 @@
 //! Flight data (issue #14): per UAV a video (file or stream, decoded through OpenCV's
-//! FFmpeg back end) and MAVLink telemetry (a `.tlog`), described by a `flight.toml`
-//! ([`meta`]); read by [`FlightSource`] and written by the simulator's `--flight-out`
-//! ([`writer`]). docs/flight-io.md has the format and the time alignment.
+//! FFmpeg back end) and MAVLink telemetry (a `.tlog`, or live over UDP), described by a
+//! `flight.toml` ([`meta`]); read by [`FlightSource`] (recorded) or
+//! [`LiveFlightSource`] (live: [`live_video`], [`live_telemetry`], [`clock_offset`]),
+//! and written by the simulator's `--flight-out` ([`writer`]). docs/flight-io.md has
+//! the format and the time alignment.
 
+pub mod clock_offset;
+pub mod live_source;
+pub mod live_telemetry;
+pub mod live_video;
 pub mod meta;
 pub mod nav_track;
 pub mod source;
@@ -10,5 +16,6 @@ pub mod tlog;
 pub mod video;
 pub mod writer;
 
+pub use live_source::LiveFlightSource;
 pub use meta::FlightMeta;
 pub use source::FlightSource;

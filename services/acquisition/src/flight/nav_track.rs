@@ -80,39 +80,77 @@ impl NavTrack {
     /// the origin uses.
     pub fn new(samples: &[NavSample], origin: &Origin, geoid_height_m: f64) -> (Self, u64) {
         let mut track = Self::default();
-        let mut bad = 0;
-        for s in samples {
-            match *s {
-                NavSample::Position {
-                    t_s,
-                    lat_deg,
-                    lon_deg,
-                    alt_m,
-                    ..
-                } => {
-                    let p = enu(origin, lat_deg, lon_deg, alt_m + geoid_height_m);
-                    // 0/0 is what an autopilot sends before it has a fix.
-                    let plausible = lat_deg.abs() <= 90.0
-                        && lon_deg.abs() <= 180.0
-                        && (lat_deg, lon_deg) != (0.0, 0.0);
-                    if plausible && t_s.is_finite() && p.iter().all(|v| v.is_finite()) {
-                        track.positions.push((t_s, p));
-                    } else {
-                        bad += 1;
-                    }
-                }
-                NavSample::Attitude { t_s, rpy_rad } => {
-                    if t_s.is_finite() && rpy_rad.iter().all(|v| v.is_finite()) {
-                        track.attitudes.push((t_s, rpy_rad));
-                    } else {
-                        bad += 1;
-                    }
-                }
-            }
-        }
+        let bad = samples
+            .iter()
+            .filter(|s| !track.push(s, origin, geoid_height_m))
+            .count() as u64;
         track.positions.sort_by(|a, b| a.0.total_cmp(&b.0));
         track.attitudes.sort_by(|a, b| a.0.total_cmp(&b.0));
         (track, bad)
+    }
+
+    /// Appends one sample (unsorted); `false` when it is not usable (left out).
+    fn push(&mut self, s: &NavSample, origin: &Origin, geoid_height_m: f64) -> bool {
+        match *s {
+            NavSample::Position {
+                t_s,
+                lat_deg,
+                lon_deg,
+                alt_m,
+                ..
+            } => {
+                let p = enu(origin, lat_deg, lon_deg, alt_m + geoid_height_m);
+                // 0/0 is what an autopilot sends before it has a fix.
+                let plausible = lat_deg.abs() <= 90.0
+                    && lon_deg.abs() <= 180.0
+                    && (lat_deg, lon_deg) != (0.0, 0.0);
+                let ok = plausible && t_s.is_finite() && p.iter().all(|v| v.is_finite());
+                if ok {
+                    self.positions.push((t_s, p));
+                }
+                ok
+            }
+            NavSample::Attitude { t_s, rpy_rad } => {
+                let ok = t_s.is_finite() && rpy_rad.iter().all(|v| v.is_finite());
+                if ok {
+                    self.attitudes.push((t_s, rpy_rad));
+                }
+                ok
+            }
+        }
+    }
+
+    /// Adds a sample as it arrives live, kept in time order (a late datagram is put in
+    /// its place); `false` when it is not usable.
+    pub fn insert(&mut self, s: &NavSample, origin: &Origin, geoid_height_m: f64) -> bool {
+        if !self.push(s, origin, geoid_height_m) {
+            return false;
+        }
+        for series in [&mut self.positions, &mut self.attitudes] {
+            let n = series.len();
+            if n >= 2 && series[n - 2].0 > series[n - 1].0 {
+                let last = series.remove(n - 1);
+                let i = series.partition_point(|(t, _)| *t <= last.0);
+                series.insert(i, last);
+            }
+        }
+        true
+    }
+
+    /// Forgets samples older than `t`, keeping the last one before it (what an
+    /// interpolation at `t` needs): a live track's memory stays flat.
+    pub fn forget_before(&mut self, t: f64) {
+        for series in [&mut self.positions, &mut self.attitudes] {
+            let i = series.partition_point(|(ts, _)| *ts < t);
+            if i > 1 {
+                series.drain(..i - 1);
+            }
+        }
+    }
+
+    /// The newest time both series reach (a live pose at `t` waits until this ≥ `t`).
+    pub fn newest(&self) -> Option<f64> {
+        Some(self.positions.last()?.0.min(self.attitudes.last()?.0))
     }
 
     pub fn is_empty(&self) -> bool {
@@ -239,6 +277,30 @@ mod tests {
         );
         assert_eq!(bad, 2);
         assert!(track.is_empty());
+    }
+
+    #[test]
+    fn a_live_track_keeps_time_order_and_forgets_the_past() {
+        let mut track = NavTrack::default();
+        for s in [attitude(0.0, 0.0), attitude(0.2, 0.2), attitude(0.1, 0.1)] {
+            assert!(track.insert(&s, &ORIGIN, 0.0));
+        }
+        for t in [0.0, 0.1, 0.2] {
+            assert!(track.insert(&position(t, 10.0 * t), &ORIGIN, 0.0));
+        }
+        assert!(!track.insert(&attitude(f64::NAN, 0.0), &ORIGIN, 0.0));
+        assert_eq!(track.newest(), Some(0.2));
+        let yaw = track.pose_at(0.15, 0.1).unwrap().yaw_deg.to_radians();
+        assert!(
+            (yaw - 0.15).abs() < 1e-9,
+            "{yaw}: the late sample is in its place"
+        );
+        track.forget_before(0.15);
+        assert!(
+            track.pose_at(0.15, 0.1).is_ok(),
+            "the sample before is kept"
+        );
+        assert_eq!(track.pose_at(0.05, 0.1), Err(NoPose::Position));
     }
 
     proptest! {

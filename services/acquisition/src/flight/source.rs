@@ -241,6 +241,7 @@ impl FrameSource for FlightSource {
                 t_s: tl,
                 poses,
                 truth: None,
+                captured_ns: None,
             }));
         };
         let name = match why {

@@ -244,6 +244,59 @@ pub fn parse_tlog(bytes: &[u8]) -> (Vec<(u8, NavSample)>, TlogCounts) {
     (samples, counts)
 }
 
+/// One MAVLink frame of a live datagram (`udpin:` telemetry).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LiveFrame {
+    pub system: u8,
+    pub component: u8,
+    /// The sender's per-link sequence number (gaps are lost messages).
+    pub seq: u8,
+    /// The frame passed its CRC (frames of ids dualgeo does not read are not checked).
+    pub crc_ok: bool,
+    /// Its navigation sample, if it is a message dualgeo reads.
+    pub sample: Option<NavSample>,
+}
+
+/// The frames of one UDP datagram (a sender may pack several), and whether bytes that
+/// are not a frame were left over (the rest of such a datagram is dropped).
+pub fn split_datagram(bytes: &[u8]) -> (Vec<LiveFrame>, bool) {
+    let mut frames = Vec::new();
+    let mut at = 0;
+    while at < bytes.len() {
+        let frame = &bytes[at..];
+        let (Some(len), Some((id, system, seq))) = (frame_len(frame), header_fields(frame)) else {
+            return (frames, true);
+        };
+        if frame.len() < len {
+            return (frames, true);
+        }
+        let component = if frame[0] == MAGIC_V2 {
+            frame[6]
+        } else {
+            frame[4]
+        };
+        let frame = &frame[..len];
+        let (crc_ok, sample) =
+            if matches!(id, GPS_RAW_INT_ID | ATTITUDE_ID | GLOBAL_POSITION_INT_ID) {
+                match decode_frame(frame) {
+                    Some(msg) => (true, sample(&msg)),
+                    None => (false, None),
+                }
+            } else {
+                (true, None)
+            };
+        frames.push(LiveFrame {
+            system,
+            component,
+            seq,
+            crc_ok,
+            sample,
+        });
+        at += len;
+    }
+    (frames, false)
+}
+
 /// Writes tlog records: the simulator's `--flight-out` and the tests.
 pub struct TlogWriter<W: Write> {
     out: W,
@@ -311,6 +364,34 @@ mod tests {
                 .unwrap();
         }
         w.into_inner()
+    }
+
+    #[test]
+    fn a_datagram_of_several_frames_splits_into_them() {
+        let mut bytes = Vec::new();
+        for (seq, msg) in [(7u8, attitude(20)), (8, position(20))] {
+            let h = MavHeader {
+                system_id: 3,
+                component_id: 1,
+                sequence: seq,
+            };
+            mavlink::write_versioned_msg(&mut bytes, MavlinkVersion::V2, h, &msg).unwrap();
+        }
+        let (frames, rest) = split_datagram(&bytes);
+        assert!(!rest);
+        assert_eq!(frames.len(), 2);
+        assert_eq!(
+            (frames[0].system, frames[0].component, frames[0].seq),
+            (3, 1, 7)
+        );
+        assert!(frames.iter().all(|f| f.crc_ok && f.sample.is_some()));
+        let mut bad = bytes.clone();
+        bad[12] ^= 0x55; // a payload byte of the first frame
+        let (frames, _) = split_datagram(&bad);
+        assert!(!frames[0].crc_ok && frames[0].sample.is_none() && frames[1].crc_ok);
+        let (frames, rest) = split_datagram(&bytes[..bytes.len() - 3]);
+        assert_eq!(frames.len(), 1, "a cut frame is not a frame");
+        assert!(rest);
     }
 
     #[test]

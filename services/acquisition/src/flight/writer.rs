@@ -94,6 +94,7 @@ impl FlightWriter {
             video: videos[u.index()].file_name.clone(),
             telemetry: format!("{}.tlog", u.name()),
             time_offset_s: BOOT_OFFSET_S,
+            video_latency_s: 0.0,
             system_id: Some(u.index() as u8 + 1),
             camera,
         };

@@ -3,6 +3,7 @@
 //!
 //! | row | histogram |
 //! | --- | --- |
+//! | acquisition | acquisition `produce` per pair: the source's own time (decode or render, and the copy into the loaned samples; live: from the frames' moment, the wait for telemetry and the copy) |
 //! | transport | every hop's `transport` (publish → the consumer woke): frames → detection and matching, detections → matching, observations → geolocation, estimates → supervisor |
 //! | detection | detection `compute` per frame |
 //! | matching | matching `compute` per pair (ORB of the pair + matching + E + transfer) |
@@ -16,7 +17,8 @@ use shared_types::stats::{percentile_distribution, Percentiles, StageStats};
 use std::collections::BTreeMap;
 use std::path::Path;
 
-pub const ROWS: [&str; 5] = [
+pub const ROWS: [&str; 6] = [
+    "acquisition",
     "transport",
     "detection",
     "matching",
@@ -95,6 +97,7 @@ impl Gathered {
                 }
                 merged
             }
+            "acquisition" => self.histogram("acquisition", "produce").cloned(),
             "detection" => self.histogram("detection", "compute").cloned(),
             "matching" => self.histogram("matching", "compute").cloned(),
             "geolocation" => self.histogram("geolocation", "compute").cloned(),
@@ -107,6 +110,7 @@ impl Gathered {
 /// `latency_us` of report.json: each row's percentiles (zeros when a row saw nothing).
 #[derive(Debug, Serialize)]
 pub struct LatencyReport {
+    pub acquisition: Percentiles,
     pub transport: Percentiles,
     pub detection: Percentiles,
     pub matching: Percentiles,
@@ -117,6 +121,7 @@ pub struct LatencyReport {
 pub fn report(g: &Gathered) -> LatencyReport {
     let p = |row| g.row(row).map(|h| Percentiles::of(&h)).unwrap_or_default();
     LatencyReport {
+        acquisition: p("acquisition"),
         transport: p("transport"),
         detection: p("detection"),
         matching: p("matching"),
