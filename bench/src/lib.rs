@@ -1,6 +1,8 @@
 //! Shared helpers for dualgeo's benchmark binaries: timing loops recorded in
 //! hdrhistogram and a one-line percentile summary.
 
+pub mod budget;
+
 use hdrhistogram::Histogram;
 use std::path::PathBuf;
 use std::time::{Duration, Instant};

@@ -12,4 +12,5 @@ pub mod nav_noise;
 pub mod service_names;
 pub mod shell;
 pub mod stats;
+pub mod trace;
 pub mod transport;

@@ -29,9 +29,18 @@ pub struct ServiceArgs {
     /// 0 for the first start, n for the n-th restart by the supervisor.
     #[arg(long, default_value_t = 0)]
     pub incarnation: u32,
+    /// Where to append this process's per-frame spans (`dualgeo run --trace`); none:
+    /// no spans are kept.
+    #[arg(long)]
+    pub trace_dir: Option<PathBuf>,
 }
 
 impl ServiceArgs {
+    /// This process's span recorder (off unless `--trace-dir` was given).
+    pub fn tracer(&self, process: &str) -> crate::trace::Tracer {
+        crate::trace::Tracer::new(self.trace_dir.as_deref(), process, self.incarnation)
+    }
+
     /// `<state-dir>/<name>` when the run keeps state.
     pub fn state_file(&self, name: &str) -> Option<PathBuf> {
         self.state_dir.as_ref().map(|d| d.join(name))

@@ -100,6 +100,34 @@ fn parse_rate(s: &str) -> Result<Rate> {
 }
 
 /// Adds what the source counted since the last call to `stats`, as `source.<name>`.
+/// When a pair is due on the replay clock, seconds after the start: its stream time
+/// (`realtime`), its place in a fixed rate, or never (`max`).
+fn due_s(rate: Rate, t_stream: f64, seq: u64) -> Option<f64> {
+    match rate {
+        Rate::Realtime => Some(t_stream),
+        Rate::Hz(hz) => Some(seq as f64 / hz),
+        Rate::Max => None,
+    }
+}
+
+/// Waits until CLOCK_MONOTONIC reaches `due_ns` (never returning before it);
+/// `false` on a stop request.
+fn wait_until(endpoint: &Endpoint, due_ns: u64) -> bool {
+    loop {
+        let now = monotonic_ns();
+        if now >= due_ns {
+            return true;
+        }
+        if endpoint
+            .node
+            .wait(Duration::from_nanos(due_ns - now))
+            .is_err()
+        {
+            return false;
+        }
+    }
+}
+
 fn count_source(source: &mut dyn FrameSource, stats: &mut StageStats) {
     for (name, n) in source.take_counts() {
         if n > 0 {
@@ -174,6 +202,12 @@ fn main() -> Result<()> {
     });
     let distortion = [Uav::Left, Uav::Right].map(|u| source.distortion(u));
     let mut saver = StatsSaver::new(&args.service);
+    let mut trace = args.service.tracer("acquisition");
+    let produce_name = if source.simulator_seed().is_some() {
+        "render"
+    } else {
+        "decode"
+    };
     let mut gate = LiveGate::new((width, height), source.period_s());
     let mut injector = match (live_sim, args.scenario.inject_faults) {
         (Some(seed), Some(rate)) => Some(
@@ -241,6 +275,36 @@ fn main() -> Result<()> {
             }
             continue;
         };
+        // The honest clock (issue #15): a paced replay whose source knows the next
+        // pair's time (a recording, a video file) waits for the pair's moment first and
+        // only then decodes, as a live stream must; the moment is its capture time.
+        let mut moment_ns: Option<u64> = None;
+        let period_ns = (source.period_s() * 1e9) as u64;
+        while let (Some(t_next), false) = (source.next_time_s(), matches!(rate, Rate::Max)) {
+            let t_stream = t_next - *t_first.get_or_insert(t_next) + t_offset;
+            let due = due_s(rate, t_stream, seq).unwrap_or(t_stream);
+            if reanchor {
+                start_ns = monotonic_ns().saturating_sub((due * 1e9) as u64);
+                reanchor = false;
+            }
+            let due_ns = start_ns + (due * 1e9) as u64;
+            // Behind the clock by more than a frame (the machine was busy): a live
+            // stream would have replaced this pair by now. Skip it, counted, and
+            // take the next; latency does not pile up.
+            if matches!(rate, Rate::Realtime) && monotonic_ns() > due_ns + period_ns {
+                source.skip(1);
+                position.consumed = source.consumed();
+                stats.count("pairs_behind", 1);
+                continue;
+            }
+            if !wait_until(&endpoint, due_ns) {
+                signalled = true;
+                break 'stream;
+            }
+            stats.record("pacing_lag", elapsed_us(due_ns, monotonic_ns()));
+            moment_ns = Some(due_ns);
+            break;
+        }
         let produce_start = monotonic_ns();
         let info = match source.next_pair(left.payload_mut(), right.payload_mut(), stride) {
             None => {
@@ -302,9 +366,6 @@ fn main() -> Result<()> {
             continue;
         }
         let produced = monotonic_ns();
-        // A live source's pair was captured when its frames arrived, not when it was
-        // handed over (waiting for its telemetry and the copy are on the clock).
-        let captured = info.captured_ns.unwrap_or(produced);
         // The source's own time: from the call, or from the frames' moment when they
         // arrived during it (a live source waits for its streams).
         let source_start = info
@@ -314,30 +375,35 @@ fn main() -> Result<()> {
         let t_first_pair = *t_first.get_or_insert(info.t_s);
         last_t = info.t_s;
         let t_stream = info.t_s - t_first_pair + t_offset;
-        // Pace: the pair leaves at its scheduled time (never earlier).
-        let due_s = match rate {
-            Rate::Realtime => Some(t_stream),
-            Rate::Hz(hz) => Some(seq as f64 / hz),
-            Rate::Max => None,
-        };
-        if let (Some(due), true) = (due_s, reanchor) {
-            start_ns = monotonic_ns().saturating_sub((due * 1e9) as u64);
-        }
-        reanchor = false;
-        if let Some(due) = due_s {
+        // A source that produces ahead (the simulator, standing in for the sensor) is
+        // paced after producing: the pair leaves at its moment, never earlier, and
+        // that moment is its capture time.
+        if let (None, Some(due)) = (moment_ns, due_s(rate, t_stream, seq)) {
+            if reanchor {
+                start_ns = monotonic_ns().saturating_sub((due * 1e9) as u64);
+            }
             let due_ns = start_ns + (due * 1e9) as u64;
-            let now = monotonic_ns();
-            if due_ns > now
-                && endpoint
-                    .node
-                    .wait(Duration::from_nanos(due_ns - now))
-                    .is_err()
-            {
+            if !wait_until(&endpoint, due_ns) {
                 signalled = true;
                 break 'stream;
             }
             stats.record("pacing_lag", elapsed_us(due_ns, monotonic_ns()));
+            moment_ns = Some(due_ns);
+            // Rendered more than a frame late: the sensor it stands in for has moved
+            // on; skip the pairs it would have delivered meanwhile (counted).
+            let late = produced.saturating_sub(due_ns) / period_ns.max(1);
+            if matches!(rate, Rate::Realtime) && late > 0 {
+                source.skip(late);
+                stats.count("pairs_behind", late);
+            }
         }
+        reanchor = false;
+        // Capture: a live source's own stamp (when its frames arrived), else the
+        // pair's moment on the replay clock; with `--rate max`, when the source handed
+        // the pair over (the end-to-end is then the pipeline's alone, decode excluded).
+        let captured = info.captured_ns.or(moment_ns).unwrap_or(produced);
+        trace.span(produce_name, seq, None, source_start, produced);
+        let publish_start = monotonic_ns();
         for (uav, sample) in [(Uav::Left, &mut left), (Uav::Right, &mut right)] {
             *sample.user_header_mut() = FrameHeader {
                 seq,
@@ -386,10 +452,14 @@ fn main() -> Result<()> {
             }
             log.flush()?;
         }
+        let mut sent_ns = publish_start;
         for mut sample in [left, right] {
-            sample.user_header_mut().published_ns = monotonic_ns();
+            sent_ns = monotonic_ns();
+            sample.user_header_mut().published_ns = sent_ns;
             sample.send().context("send frame")?;
         }
+        // Ends when the last frame was stamped: what follows cannot precede it.
+        trace.span("publish", seq, None, publish_start, sent_ns);
         for w in &wake {
             w.notify().context("wake a stage")?;
         }
@@ -397,7 +467,9 @@ fn main() -> Result<()> {
         stats.count("frames_in", 2);
         seq += 1;
         saver.tick(&stats);
+        trace.maybe_flush();
     }
+    trace.flush();
     count_source(source.as_mut(), &mut stats);
     if let Some(log) = log {
         log.finish()?;

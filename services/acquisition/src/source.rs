@@ -58,7 +58,8 @@ pub trait FrameSource {
     /// Pairs taken from the source since the start or the last rewind, including the
     /// ones it dropped itself: the position a restart resumes at with [`Self::skip`].
     fn consumed(&self) -> u64;
-    /// Skips the first `n` pairs (a restart resuming its predecessor's position).
+    /// Skips the next `n` pairs (a restart resuming its predecessor's position; a
+    /// paced replay that fell behind the clock).
     fn skip(&mut self, n: u64);
     /// Starts again from the first pair.
     fn rewind(&mut self) -> Result<(), SourceError>;
@@ -71,6 +72,15 @@ pub trait FrameSource {
         right: &mut [u8],
         stride: usize,
     ) -> Option<Result<PairInfo, SourceError>>;
+    /// The stream time of the pair [`Self::next_pair`] will produce, when the source
+    /// knows it before producing it (a recording's telemetry rows, a video's frame
+    /// index): paced replay then waits for the pair's moment first and decodes after
+    /// it, as a live stream must (the honest clock of issue #15). `None` for a source
+    /// that produces ahead (the simulator renders ahead: it stands in for the sensor)
+    /// or stamps its own capture (a live flight).
+    fn next_time_s(&self) -> Option<f64> {
+        None
+    }
     /// Counters the source kept since the last call (name, increment).
     fn take_counts(&mut self) -> Vec<(&'static str, u64)> {
         Vec::new()
@@ -237,8 +247,15 @@ impl FrameSource for RecordingSource {
         self.next as u64
     }
 
+    fn next_time_s(&self) -> Option<f64> {
+        let pair = self.pairs.get(self.next)?;
+        Some(self.rec.telemetry[pair.left].t_s)
+    }
+
     fn skip(&mut self, n: u64) {
         self.next = usize::try_from(n)
+            .ok()
+            .and_then(|n| self.next.checked_add(n))
             .unwrap_or(usize::MAX)
             .min(self.pairs.len());
     }

@@ -44,6 +44,7 @@ fn main() -> Result<()> {
     let mut stats = StageStats::new("detection");
     let mut gaps = [SeqGaps::default(); 2];
     let mut saver = StatsSaver::new(&args.service);
+    let mut trace = args.service.tracer("detection");
     tracing::info!(
         run = endpoint.run_id(),
         incarnation = args.service.incarnation,
@@ -100,14 +101,19 @@ fn main() -> Result<()> {
                 }
                 let done = monotonic_ns();
                 stats.record("compute", elapsed_us(start, done));
+                let uav_id = Some(header.uav);
+                trace.span("wait", header.seq, uav_id, header.published_ns, start);
+                trace.span("detect", header.seq, uav_id, start, done);
                 msg.published_ns = monotonic_ns();
                 publisher.send_copy(msg).context("publish detection")?;
                 wake_matching.notify().context("wake matching")?;
             }
         }
         saver.tick(&stats);
+        trace.maybe_flush();
         Ok(true)
     })?;
+    trace.flush();
     let path = saver.finish(&stats)?;
     tracing::info!(?stop, stats = %path.display(), "detection stopped");
     Ok(())

@@ -87,6 +87,7 @@ fn main() -> Result<()> {
     let state_path = args.service.state_file("geolocation.ckpt");
     let mut last = resume(state_path.as_deref(), &config, &mut temporal, &mut stats);
     let mut saver = StatsSaver::new(&args.service);
+    let mut trace = args.service.tracer("geolocation");
     tracing::info!(run = endpoint.run_id(), method = ?config.method, incarnation = args.service.incarnation, "geolocation ready");
 
     let stop = serve(&listener, |wake| -> Result<bool> {
@@ -100,6 +101,7 @@ fn main() -> Result<()> {
                 first = false;
             }
             let start = monotonic_ns();
+            let (set_pair, set_published) = (set.pair_seq, set.published_ns);
             stats.record("wait", elapsed_us(set.published_ns, start));
             stats.count("sets", 1);
             stats.count("sets_lost", gaps.see(set.set_seq));
@@ -113,6 +115,15 @@ fn main() -> Result<()> {
             stats.record("compute", elapsed_us(start, done));
             msg.published_ns = monotonic_ns();
             stats.record("end_to_end", elapsed_us(msg.capture_ns, msg.published_ns));
+            trace.span("wait", set_pair, None, set_published, start);
+            trace.span("estimate", set_pair, None, start, done);
+            trace.span(
+                "end_to_end",
+                msg.pair_seq,
+                None,
+                msg.capture_ns,
+                msg.published_ns,
+            );
             publisher.send_copy(msg).context("publish estimate")?;
             wake_supervisor.notify().context("wake supervisor")?;
             last = Some((msg.pair_seq, msg.t_s));
@@ -133,8 +144,10 @@ fn main() -> Result<()> {
             }
         }
         saver.tick(&stats);
+        trace.maybe_flush();
         Ok(true)
     })?;
+    trace.flush();
     let path = saver.finish(&stats)?;
     tracing::info!(?stop, stats = %path.display(), "geolocation stopped");
     Ok(())

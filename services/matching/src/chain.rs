@@ -18,6 +18,7 @@ use geolocation::{
 };
 use nalgebra::{Matrix3, Vector2, Vector3};
 use opencv::core as cv;
+use shared_types::clock::monotonic_ns;
 use shared_types::conventions::{camera_to_world, Intrinsics, Uav};
 use shared_types::lens::Distortion;
 use shared_types::messages::PoseSample;
@@ -145,6 +146,19 @@ pub struct Located {
     pub past: Vec<PastMatch>,
 }
 
+/// One timed step of matching a past image (`--trace`): `past` (the whole job),
+/// `match` (Hamming matching), `F` (a fundamental-matrix fit) and `transfer` (the
+/// epipolar-line intersection), against the keyframe `keyframe` of UAV `uav`, on
+/// CLOCK_MONOTONIC.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Step {
+    pub name: &'static str,
+    pub uav: u8,
+    pub keyframe: u64,
+    pub start_ns: u64,
+    pub end_ns: u64,
+}
+
 /// Wall time of each step on the calling thread, microseconds.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct ChainTiming {
@@ -216,6 +230,8 @@ impl std::ops::AddAssign for ChainCounts {
 
 pub struct VisionChain {
     counts: ChainCounts,
+    /// The timed steps of the last `match_current` (for `--trace`).
+    steps: Vec<Step>,
     config: MatchingConfig,
     estimator: EstimatorConfig,
     orb: OrbExtractor,
@@ -248,6 +264,7 @@ struct PastResult {
     result: Result<PastMatch, MatchReject>,
     homographies: [Option<Matrix3<f64>>; 2],
     timing: ChainTiming,
+    steps: Vec<Step>,
     /// Sides matched again with `retry_ratio_test`.
     retried: [bool; 2],
 }
@@ -265,6 +282,7 @@ impl VisionChain {
         let ring = || KeyframeRing::new(config.ring_capacity, config.keyframe_spacing_m);
         Ok(Self {
             counts: ChainCounts::default(),
+            steps: Vec::new(),
             orb: OrbExtractor::new(&config)?,
             rings: [ring(), ring()],
             smoothed: [None, None],
@@ -288,6 +306,11 @@ impl VisionChain {
     /// Adds counts from work done outside the chain (the service's second ORB thread).
     pub fn add_counts(&mut self, c: &ChainCounts) {
         self.counts += *c;
+    }
+
+    /// The timed steps of the last past-image matching (`--trace`).
+    pub fn steps(&self) -> &[Step] {
+        &self.steps
     }
 
     /// The counts since the last call, and zero.
@@ -385,6 +408,7 @@ impl VisionChain {
         timing: &mut ChainTiming,
         rejections: &mut Vec<(Uav, u64, MatchReject)>,
     ) -> Result<MatchOutcome, ChainError> {
+        self.steps.clear();
         self.track(current);
         // The detector works on the recorded pixels; the geometry needs the ideal
         // pinhole ones (the keypoints were undistorted the same way).
@@ -489,7 +513,9 @@ impl VisionChain {
         let mut past_obs = Vec::new();
         let mut new_priors: Vec<(PriorKey, Prior)> = Vec::new();
         let mut counts = ChainCounts::default();
+        let mut steps = Vec::new();
         for ((uav, kf), r) in jobs.iter().zip(results) {
+            steps.extend_from_slice(&r.steps);
             let retried = r.retried.iter().filter(|x| **x).count() as u64;
             counts.retried_looser_ratio += retried;
             if r.result.is_ok() {
@@ -521,6 +547,7 @@ impl VisionChain {
         }
 
         self.counts += counts;
+        self.steps = steps;
         self.priors.extend(new_priors);
         // Forget keyframes the rings have evicted.
         let rings = &self.rings;
@@ -570,11 +597,20 @@ fn match_past(
     priors: &[Option<Matrix3<f64>>; 2],
     neighbours: &mut Vec<Option<crate::hamming::Nearest2>>,
 ) -> PastResult {
+    let job_start = monotonic_ns();
     let mut out = PastResult {
         result: Err(MatchReject::FundamentalFailed),
         homographies: [None, None],
         timing: ChainTiming::default(),
+        steps: Vec::new(),
         retried: [false, false],
+    };
+    let step = |name: &'static str, start_ns: u64| Step {
+        name,
+        uav: uav.index() as u8,
+        keyframe: kf.seq,
+        start_ns,
+        end_ns: monotonic_ns(),
     };
     let mut geometry: [Option<PairGeometry>; 2] = [None, None];
     let mut guided = [false, false];
@@ -582,8 +618,12 @@ fn match_past(
         // The vertical in the current camera's frame: roll and pitch only (the yaw and
         // its unknown bias turn about it).
         let up = camera_to_world(current[side].pose.attitude()).transpose() * Vector3::z();
-        let mut fit = |guide: Option<&Matrix3<f64>>, ratio: f32, timing: &mut ChainTiming| {
+        let mut fit = |guide: Option<&Matrix3<f64>>,
+                       ratio: f32,
+                       timing: &mut ChainTiming,
+                       steps: &mut Vec<Step>| {
             let t = Instant::now();
+            let t_ns = monotonic_ns();
             let (a, b) = match guide {
                 Some(h) => match_points_guided(
                     &features[side],
@@ -596,19 +636,22 @@ fn match_past(
                 None => match_points(&features[side], &kf.features, ratio, neighbours),
             };
             timing.matching_us += micros(t);
+            steps.push(step("match", t_ns));
             let t = Instant::now();
+            let t_ns = monotonic_ns();
             let intrinsics = (&current[side].intrinsics, &kf.intrinsics);
             let result = estimate_fundamental(&a, &b, intrinsics, &up, config);
             timing.fundamental_us += micros(t);
+            steps.push(step("F", t_ns));
             result
         };
         let mut result = Err(MatchReject::FundamentalFailed);
         if let Some(h) = &priors[side] {
-            result = fit(Some(h), config.ratio_test, &mut out.timing);
+            result = fit(Some(h), config.ratio_test, &mut out.timing, &mut out.steps);
             guided[side] = result.is_ok();
         }
         if result.is_err() {
-            result = fit(None, config.ratio_test, &mut out.timing);
+            result = fit(None, config.ratio_test, &mut out.timing, &mut out.steps);
         }
         // Too little support under the strict ratio: a scene with repeated texture
         // (windows, lane marks) loses its good matches to the ratio test. Once more,
@@ -618,7 +661,12 @@ fn match_past(
             Err(MatchReject::TooFewMatches { .. } | MatchReject::TooFewInliers { .. })
         );
         if starved && config.retry_ratio_test > config.ratio_test {
-            result = fit(None, config.retry_ratio_test, &mut out.timing);
+            result = fit(
+                None,
+                config.retry_ratio_test,
+                &mut out.timing,
+                &mut out.steps,
+            );
             out.retried[side] = true;
         }
         match result {
@@ -628,14 +676,17 @@ fn match_past(
             }
             Err(reason) => {
                 out.result = Err(reason);
+                out.steps.push(step("past", job_start));
                 return out;
             }
         }
     }
     let [Some(gl), Some(gr)] = geometry else {
+        out.steps.push(step("past", job_start));
         return out;
     };
     let t = Instant::now();
+    let t_ns = monotonic_ns();
     let pixel = transfer_point(
         &gl.f,
         detections[0],
@@ -650,6 +701,8 @@ fn match_past(
         config,
     );
     out.timing.transfer_us += micros(t);
+    out.steps.push(step("transfer", t_ns));
+    out.steps.push(step("past", job_start));
     out.result = pixel.map(|pixel| PastMatch {
         uav,
         seq: kf.seq,

@@ -21,6 +21,7 @@ use shared_types::conventions::Intrinsics;
 use shared_types::lens::Distortion;
 use shared_types::messages::{DetectionMsg, FrameHeader, ObservationSetMsg, MAX_OBSERVATIONS};
 use shared_types::stats::StageStats;
+use shared_types::trace::Tracer;
 use std::collections::BTreeMap;
 use std::sync::Arc;
 
@@ -45,6 +46,8 @@ pub struct Intake {
     worker_orb: OrbExtractor,
     pending: BTreeMap<u64, Pending>,
     pub stats: StageStats,
+    /// Per-frame spans (`--trace`; off by default).
+    pub trace: Tracer,
     /// Where the rings are checkpointed, and what was admitted since the last save.
     store: Option<RingStore>,
     unsaved: [bool; 2],
@@ -98,6 +101,7 @@ impl Intake {
             chain: VisionChain::new(config, estimator)?,
             pending: BTreeMap::new(),
             stats: StageStats::new("matching"),
+            trace: Tracer::off(),
             store: None,
             unsaved: [false; 2],
         })
@@ -174,7 +178,8 @@ impl Intake {
         } else {
             (extract_left(worker_orb), extract_right(chain))
         };
-        let orb_us = elapsed_us(start, monotonic_ns());
+        let orb_end = monotonic_ns();
+        let orb_us = elapsed_us(start, orb_end);
         let l = l.map(|found| {
             found.map(|(header, features, counts)| {
                 self.chain.add_counts(&counts);
@@ -188,6 +193,10 @@ impl Intake {
                     slot.frames[uav] = Some((header, features));
                     slot.orb_us += orb_us;
                     self.stats.record("orb", orb_us);
+                    let uav = Some(header.uav);
+                    self.trace
+                        .span("wait", header.seq, uav, header.published_ns, start);
+                    self.trace.span("orb", header.seq, uav, start, orb_end);
                 }
                 Ok(None) => {}
                 Err(e) => {
@@ -312,7 +321,16 @@ impl Intake {
         };
         let admitted = self.chain.admit([&ml, &mr], &features);
         self.unsaved = [self.unsaved[0] | admitted[0], self.unsaved[1] | admitted[1]];
-        let match_us = elapsed_us(start, monotonic_ns());
+        let end = monotonic_ns();
+        let match_us = elapsed_us(start, end);
+        if self.trace.is_on() {
+            self.trace.span("match_pair", seq, None, start, end);
+            for st in self.chain.steps() {
+                let (uav, kf) = (Some(st.uav), Some(st.keyframe));
+                self.trace
+                    .past_span(st.name, seq, uav, kf, st.start_ns, st.end_ns);
+            }
+        }
         self.stats.record("match", match_us);
         self.stats.record("compute", pair.orb_us / 2 + match_us);
         set

@@ -97,6 +97,7 @@ fn main() -> Result<()> {
     let config: MatchingConfig = load_section(path, "matching")?;
     let estimator: EstimatorConfig = load_section(path, "estimator")?;
     let mut intake = Intake::new(config.clone(), estimator)?;
+    intake.trace = args.service.tracer("matching");
     if let Some(dir) = &args.service.state_dir {
         intake.restore(dir, config, estimator)?;
     }
@@ -133,8 +134,10 @@ fn main() -> Result<()> {
         }
         intake.checkpoint();
         saver.tick(&intake.stats);
+        intake.trace.maybe_flush();
         Ok(true)
     })?;
+    intake.trace.flush();
     let path = saver.finish(&intake.stats)?;
     tracing::info!(?stop, stats = %path.display(), "matching stopped");
     Ok(())

@@ -197,6 +197,12 @@ impl FrameSource for FlightSource {
         self.videos[0].decoded
     }
 
+    /// The next left frame's video time as its index says (the container's timestamp
+    /// is known only once decoded; they agree for a constant-rate video).
+    fn next_time_s(&self) -> Option<f64> {
+        Some(self.videos[0].decoded as f64 / self.meta.frame_rate_hz)
+    }
+
     /// Skips `n` frames of each video (approximate when the previous run dropped
     /// unpaired frames: the videos are assumed to start together).
     fn skip(&mut self, n: u64) {

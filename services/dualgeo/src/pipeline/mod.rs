@@ -30,6 +30,7 @@ mod outputs;
 pub(crate) mod plots;
 mod restart;
 mod soak;
+mod trace_file;
 mod track;
 
 use anyhow::{bail, Context, Result};
@@ -72,6 +73,11 @@ pub struct RunArgs {
     pub live_out: live_out::LiveOutArgs,
     #[command(flatten)]
     pub mcap: mcap_out::McapArgs,
+    /// Write a per-frame trace of the run (Chrome trace-event JSON: open it in
+    /// ui.perfetto.dev or chrome://tracing): a span per stage per frame, one track per
+    /// process, on the shared monotonic clock. Off by default.
+    #[arg(long, value_name = "FILE")]
+    pub trace: Option<PathBuf>,
     /// Soak report: sample every process's memory and descriptors and the stages'
     /// latency this often (soak.csv, soak.png and a flatness verdict).
     #[arg(long, default_value_t = 60.0)]
@@ -142,6 +148,25 @@ pub fn run(args: &RunArgs) -> Result<()> {
     let stats_dir = out.join("stats");
     let stream_dir = out.join("stream");
     let state_dir = out.join("state");
+    let trace_dir = out.join("trace");
+    if let Some(dir) = args
+        .trace
+        .as_ref()
+        .and_then(|f| f.parent())
+        .filter(|d| !d.as_os_str().is_empty())
+    {
+        if !dir.is_dir() {
+            bail!("--trace: no directory {}", dir.display());
+        }
+    }
+    if trace_dir.exists() {
+        std::fs::remove_dir_all(&trace_dir)
+            .with_context(|| format!("clear {}", trace_dir.display()))?;
+    }
+    if args.trace.is_some() {
+        std::fs::create_dir_all(&trace_dir)
+            .with_context(|| format!("create {}", trace_dir.display()))?;
+    }
     for dir in [&stats_dir, &stream_dir, &state_dir] {
         if dir.exists() {
             std::fs::remove_dir_all(dir).with_context(|| format!("clear {}", dir.display()))?;
@@ -169,6 +194,9 @@ pub fn run(args: &RunArgs) -> Result<()> {
     ];
     if let Some(c) = &args.config {
         common.extend(["--config".into(), c.display().to_string()]);
+    }
+    if args.trace.is_some() {
+        common.extend(["--trace-dir".into(), trace_dir.display().to_string()]);
     }
     eprintln!(
         "dualgeo run {run_id}: source {}, rate {}, output {}",
@@ -250,6 +278,19 @@ pub fn run(args: &RunArgs) -> Result<()> {
     if let Some(r) = recorded {
         r?;
         collected.stats.merge(&mcap_stats);
+    }
+    if let Some(file) = &args.trace {
+        let t = trace_file::write(&trace_dir, file)?;
+        eprintln!(
+            "trace: {} ({} spans; open it in ui.perfetto.dev){}",
+            file.display(),
+            t.spans,
+            if t.unreadable_lines > 0 {
+                format!(", {} unreadable lines skipped", t.unreadable_lines)
+            } else {
+                String::new()
+            }
+        );
     }
     outputs::write_all(args, out, &stats_dir, &stream_dir, &collected)
 }
