@@ -271,10 +271,7 @@ impl FrameSource for LiveFlightSource {
             )));
         }
         if let Some((uav, why)) = missing {
-            let name = match why {
-                NoPose::Position => "no_pose_position",
-                NoPose::Attitude => "no_pose_attitude",
-            };
+            let name = why.counter();
             if !self.warned.contains(&name) {
                 self.warned.push(name);
                 tracing::warn!(

@@ -133,14 +133,7 @@ impl LiveTelemetry {
             "telemetry_lost",
             "telemetry_ring_full",
         ];
-        let out = names
-            .iter()
-            .zip(now.iter().zip(self.reported))
-            .filter(|(_, (n, r))| *n > r)
-            .map(|(name, (n, r))| (*name, n - r))
-            .collect();
-        self.reported = now;
-        out
+        super::increments(names, now, &mut self.reported)
     }
 }
 

@@ -134,14 +134,7 @@ impl LiveVideo {
             "video_open_failures",
             "video_wrong_size",
         ];
-        let out = names
-            .iter()
-            .zip(now.iter().zip(self.reported))
-            .filter(|(_, (n, r))| *n > r)
-            .map(|(name, (n, r))| (*name, n - r))
-            .collect();
-        self.reported = now;
-        out
+        super::increments(names, now, &mut self.reported)
     }
 }
 

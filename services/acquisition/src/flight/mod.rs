@@ -17,5 +17,22 @@ pub mod video;
 pub mod writer;
 
 pub use live_source::LiveFlightSource;
+
+/// The increments of counters since they were last reported (`reported` is updated):
+/// the `(name, increment)` pairs a source's `take_counts` returns, zeros left out.
+pub(crate) fn increments<const N: usize>(
+    names: [&'static str; N],
+    now: [u64; N],
+    reported: &mut [u64; N],
+) -> Vec<(&'static str, u64)> {
+    let out = names
+        .iter()
+        .zip(now.iter().zip(reported.iter()))
+        .filter(|(_, (n, r))| n > r)
+        .map(|(name, (n, r))| (*name, n - r))
+        .collect();
+    *reported = now;
+    out
+}
 pub use meta::FlightMeta;
 pub use source::FlightSource;

@@ -25,6 +25,16 @@ pub enum NoPose {
     Attitude,
 }
 
+impl NoPose {
+    /// The counter a pair dropped for this is counted in.
+    pub fn counter(self) -> &'static str {
+        match self {
+            NoPose::Position => "no_pose_position",
+            NoPose::Attitude => "no_pose_attitude",
+        }
+    }
+}
+
 #[derive(Debug, Clone, Default)]
 pub struct NavTrack {
     /// (t, [x, y, z] ENU m), time-sorted.

@@ -10,7 +10,7 @@
 //! frame's video time.
 
 use super::meta::{is_url, FlightMeta};
-use super::nav_track::{NavTrack, NoPose};
+use super::nav_track::NavTrack;
 use super::tlog::{parse_tlog, TlogCounts};
 use super::video::VideoReader;
 use crate::source::{FrameSource, PairInfo, SourceError};
@@ -250,10 +250,7 @@ impl FrameSource for FlightSource {
                 captured_ns: None,
             }));
         };
-        let name = match why {
-            NoPose::Position => "no_pose_position",
-            NoPose::Attitude => "no_pose_attitude",
-        };
+        let name = why.counter();
         if !self.warned.contains(&name) {
             self.warned.push(name);
             tracing::warn!(
