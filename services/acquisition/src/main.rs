@@ -99,7 +99,6 @@ fn parse_rate(s: &str) -> Result<Rate> {
     }
 }
 
-/// Adds what the source counted since the last call to `stats`, as `source.<name>`.
 /// When a pair is due on the replay clock, seconds after the start: its stream time
 /// (`realtime`), its place in a fixed rate, or never (`max`).
 fn due_s(rate: Rate, t_stream: f64, seq: u64) -> Option<f64> {
@@ -128,6 +127,7 @@ fn wait_until(endpoint: &Endpoint, due_ns: u64) -> bool {
     }
 }
 
+/// Adds what the source counted since the last call to `stats`, as `source.<name>`.
 fn count_source(source: &mut dyn FrameSource, stats: &mut StageStats) {
     for (name, n) in source.take_counts() {
         if n > 0 {
@@ -378,7 +378,9 @@ fn main() -> Result<()> {
         // A source that produces ahead (the simulator, standing in for the sensor) is
         // paced after producing: the pair leaves at its moment, never earlier, and
         // that moment is its capture time.
-        if let (None, Some(due)) = (moment_ns, due_s(rate, t_stream, seq)) {
+        // (A live source is paced by its streams and stamps its own capture.)
+        let paced_here = moment_ns.is_none() && info.captured_ns.is_none();
+        if let (true, Some(due)) = (paced_here, due_s(rate, t_stream, seq)) {
             if reanchor {
                 start_ns = monotonic_ns().saturating_sub((due * 1e9) as u64);
             }

@@ -55,8 +55,8 @@ impl FlightSource {
             let u = meta.uav(uav);
             if is_url(&u.telemetry) {
                 return Err(format!(
-                    "[uav.{}] telemetry {:?}: live MAVLink telemetry is not supported yet; \
-                     give a .tlog file",
+                    "[uav.{}] telemetry {:?} is live: a live flight is read by \
+                     LiveFlightSource (acquisition::source::open chooses it)",
                     uav.name(),
                     u.telemetry
                 ));
