@@ -183,7 +183,15 @@ fn main() -> Result<()> {
     );
     for (name, target, value, _) in &now {
         let (b, ratio) = match before.get(name) {
-            Some(b) => (format!("{b:.2}"), format!("{:.2}", value / b)),
+            Some(&b) if b != 0.0 => (format!("{b:.2}"), format!("{:.2}", value / b)),
+            Some(&b) => (
+                format!("{b:.2}"),
+                if *value == 0.0 {
+                    "=".into()
+                } else {
+                    "–".into()
+                },
+            ),
             None => ("–".into(), "–".into()),
         };
         table.push_str(&format!(

@@ -275,11 +275,17 @@ impl FrameSource for RecordingSource {
         self.next += 1;
         let rec = &self.rec;
         let result = (|| -> Result<PairInfo, SourceError> {
-            for (index, dst) in [(pair.left, left), (pair.right, right)] {
+            let decode = |index: usize, dst: &mut [u8]| {
                 let row = &rec.telemetry[index];
                 let camera = rec.meta.uav(row.uav).camera;
-                decode_image_into(&rec.root.join(&row.file), camera.width, camera.height, dst)?;
-            }
+                decode_image_into(&rec.root.join(&row.file), camera.width, camera.height, dst)
+            };
+            // Left and right decode at once (issue #15: the pair's decoding is on the
+            // end-to-end clock): the left on rayon's persistent pool, never a thread
+            // per pair (OpenCV keeps per-thread data of every thread that called it).
+            let (l, r) = rayon::join(|| decode(pair.left, left), || decode(pair.right, right));
+            l?;
+            r?;
             Ok(PairInfo {
                 t_s: rec.telemetry[pair.left].t_s,
                 poses: [
