@@ -148,6 +148,19 @@ impl LiveGate {
         Ok(poses)
     }
 
+    /// A pair at `t_s` that acquisition skipped on purpose (it fell behind the clock):
+    /// the UAVs' clocks move on, so the skip is not taken for a telemetry gap.
+    pub fn skipped(&mut self, t_s: f64) {
+        if !t_s.is_finite() {
+            return;
+        }
+        for seen in &mut self.seen_t {
+            if seen.is_none_or(|s| t_s > s) {
+                *seen = Some(t_s);
+            }
+        }
+    }
+
     /// Faults seen so far, all kinds.
     pub fn total(&self) -> u64 {
         self.counts.values().sum()
@@ -242,6 +255,16 @@ mod tests {
         let mut p = good(PERIOD);
         p[1].t_s += 0.4 * PERIOD;
         assert!(gate().check(&p).is_ok());
+    }
+
+    #[test]
+    fn pairs_skipped_on_purpose_are_no_telemetry_gap() {
+        let mut g = gate();
+        for k in 1..6 {
+            g.skipped(k as f64 * PERIOD);
+        }
+        assert!(g.check(&good(6.0 * PERIOD)).is_ok());
+        assert_eq!(g.total(), 0, "{:?}", g.counts());
     }
 
     #[test]

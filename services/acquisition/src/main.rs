@@ -292,6 +292,7 @@ fn main() -> Result<()> {
             // stream would have replaced this pair by now. Skip it, counted, and
             // take the next; latency does not pile up.
             if matches!(rate, Rate::Realtime) && monotonic_ns() > due_ns + period_ns {
+                gate.skipped(t_next + t_offset);
                 source.skip(1);
                 position.consumed = source.consumed();
                 stats.count("pairs_behind", 1);
@@ -395,6 +396,7 @@ fn main() -> Result<()> {
             // on; skip the pairs it would have delivered meanwhile (counted).
             let late = produced.saturating_sub(due_ns) / period_ns.max(1);
             if matches!(rate, Rate::Realtime) && late > 0 {
+                gate.skipped(info.t_s + t_offset + late as f64 * source.period_s());
                 source.skip(late);
                 stats.count("pairs_behind", late);
             }
