@@ -126,6 +126,7 @@ fn every_span_nests_in_its_estimates_end_to_end_and_capture_is_the_due_time() {
         "wait",
         "detect",
         "orb",
+        "track",
         "match_pair",
         "past",
         "match",

@@ -57,6 +57,16 @@ struct Args {
     /// Guided-matching window, pixels (0 = brute force always; default: MatchingConfig's).
     #[arg(long)]
     guided_radius: Option<f64>,
+    /// Follow ground points between ORB frames: true | false (default:
+    /// MatchingConfig's; false = ORB and matching on every frame).
+    #[arg(long)]
+    track: Option<bool>,
+    /// ORB at least every N frames while tracking (default: MatchingConfig's).
+    #[arg(long)]
+    track_refresh: Option<u32>,
+    /// Ground inliers tracked per past image (default: MatchingConfig's).
+    #[arg(long)]
+    track_points: Option<usize>,
     /// Also list the N geolocations with the largest 3-D error after the filter.
     #[arg(long, default_value_t = 0)]
     worst: usize,
@@ -109,6 +119,15 @@ fn main() -> Result<()> {
     }
     if let Some(n) = args.homography_iterations {
         matching.homography_max_iterations = n;
+    }
+    if let Some(b) = args.track {
+        matching.track_between_orb = b;
+    }
+    if let Some(n) = args.track_refresh {
+        matching.track_refresh_frames = n;
+    }
+    if let Some(n) = args.track_points {
+        matching.track_points_per_image = n;
     }
     let mut chain = VisionChain::new(matching, EstimatorConfig::default())?;
     let mut images = [
@@ -166,8 +185,13 @@ fn main() -> Result<()> {
                 for model in located.past.iter().flat_map(|p| p.models).flatten() {
                     *outcomes.entry(format!("F model: {model:?}")).or_default() += 1;
                 }
-                for guided in located.past.iter().flat_map(|p| p.guided) {
-                    let how = if guided { "guided" } else { "brute force" };
+                let sides = located.past.iter().flat_map(|p| p.guided.into_iter().zip(p.chained));
+                for (guided, chained) in sides {
+                    let how = match (chained, guided) {
+                        (true, _) => "by tracking",
+                        (false, true) => "guided",
+                        (false, false) => "brute force",
+                    };
                     *outcomes.entry(format!("pairs matched {how}")).or_default() += 1;
                 }
                 if let Ok(e) = unfiltered {

@@ -5,7 +5,9 @@
 //! Histograms (µs): `transport` (frame publish → this stage woke, first frame of a
 //! wake-up), `wait` (frame publish → processing starts), `compute` (detection).
 //! Counters: `frames`, `found`, `frames_lost` (sequence gaps: overwritten while busy),
-//! `bad_frames`, `exposure_retries` (frames looked at again with the exposure-scaled
+//! `bad_frames`, `window_looks` / `window_misses` (frames searched first in a window
+//! around the track, and those that then needed the whole frame), `exposure_retries`
+//! (frames looked at again with the exposure-scaled
 //! brightness floor), `partial_view_dropped` (detections of a partly hidden target,
 //! dropped by the per-camera track of [`TrackedDetector`]).
 
@@ -92,6 +94,8 @@ fn main() -> Result<()> {
                 let counts = detector.take_counts();
                 stats.count("exposure_retries", counts.exposure_retries);
                 stats.count("partial_view_dropped", counts.partial_view_dropped);
+                stats.count("window_looks", counts.window_looks);
+                stats.count("window_misses", counts.window_misses);
                 if let Some(d) = found {
                     stats.count("found", 1);
                     msg.found = 1;

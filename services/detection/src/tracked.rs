@@ -14,6 +14,10 @@ pub struct TrackCounts {
     pub exposure_retries: u64,
     /// Detections of a partly hidden target, dropped.
     pub partial_view_dropped: u64,
+    /// Frames looked at in a window around the track first, and of those the ones that
+    /// needed the whole frame after all.
+    pub window_looks: u64,
+    pub window_misses: u64,
 }
 
 pub struct TrackedDetector {
@@ -21,6 +25,7 @@ pub struct TrackedDetector {
     guards: [PartialViewGuard; 2],
     counts: TrackCounts,
     retries_seen: u64,
+    windows_seen: (u64, u64),
 }
 
 impl TrackedDetector {
@@ -31,6 +36,7 @@ impl TrackedDetector {
             guards: [guard; 2],
             counts: TrackCounts::default(),
             retries_seen: 0,
+            windows_seen: (0, 0),
         })
     }
 
@@ -50,6 +56,10 @@ impl TrackedDetector {
         let retries = self.detector.exposure_retries();
         self.counts.exposure_retries += retries - self.retries_seen;
         self.retries_seen = retries;
+        let (looks, misses) = self.detector.window_counts();
+        self.counts.window_looks += looks - self.windows_seen.0;
+        self.counts.window_misses += misses - self.windows_seen.1;
+        self.windows_seen = (looks, misses);
         let Some(detection) = found? else {
             return Ok(None);
         };

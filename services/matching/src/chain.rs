@@ -6,10 +6,11 @@
 
 use crate::config::MatchingConfig;
 use crate::epipolar::{
-    estimate_fundamental, match_points, match_points_guided, transfer_point, ImageBounds,
-    MatchReject, PairGeometry,
+    estimate_fundamental, estimate_fundamental_masked, match_points, match_points_guided,
+    transfer_point, ImageBounds, MatchReject, PairGeometry,
 };
 use crate::features::{Features, OrbExtractor};
+use crate::frame_tracking::{FrameTracker, Motion, Observed, TrackReport, TrackedPoints};
 use crate::ground_plane::PlaneModel;
 use crate::ring::{Keyframe, KeyframeRing};
 use geolocation::{
@@ -18,6 +19,7 @@ use geolocation::{
 };
 use nalgebra::{Matrix3, Vector2, Vector3};
 use opencv::core as cv;
+use opencv::prelude::*;
 use shared_types::clock::monotonic_ns;
 use shared_types::conventions::{camera_to_world, Intrinsics, Uav};
 use shared_types::lens::Distortion;
@@ -44,7 +46,27 @@ pub struct FrameInput<'a> {
     pub height: u32,
 }
 
-impl FrameInput<'_> {
+impl<'a> FrameInput<'a> {
+    /// The same frame with other pixels (its grey copy).
+    pub fn with_image<'b>(&self, image: &'b cv::Mat) -> FrameInput<'b> {
+        FrameInput::from_meta(&self.meta(), image)
+    }
+
+    /// A frame from its description and pixels.
+    pub fn from_meta(m: &FrameMeta, image: &'a cv::Mat) -> Self {
+        FrameInput {
+            seq: m.seq,
+            t_s: m.t_s,
+            pose: m.pose,
+            image,
+            detection: m.detection,
+            intrinsics: m.intrinsics,
+            distortion: m.distortion,
+            width: m.width,
+            height: m.height,
+        }
+    }
+
     /// Everything but the pixels.
     pub fn meta(&self) -> FrameMeta {
         FrameMeta {
@@ -125,6 +147,9 @@ pub struct PastMatch {
     pub models: [Option<PlaneModel>; 2],
     /// Whether each side was matched guided by a prior (else brute force).
     pub guided: [bool; 2],
+    /// Whether each side's homography was carried by frame-to-frame tracking from an
+    /// earlier fit instead of fitted on this frame (`frame_tracking.rs`).
+    pub chained: [bool; 2],
 }
 
 #[derive(Debug)]
@@ -162,7 +187,8 @@ pub struct Step {
 /// Wall time of each step on the calling thread, microseconds.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct ChainTiming {
-    /// ORB on the current left and right frames.
+    /// ORB (or frame-to-frame tracking) on the current left and right frames, and ORB
+    /// run late on a tracked frame the pair turned out to need.
     pub orb_us: f64,
     /// Ratio-tested Hamming matching, current vs past (2 × (2N − 2) matchings).
     pub matching_us: f64,
@@ -216,6 +242,11 @@ pub struct ChainCounts {
     pub keypoints_outside_lens: u64,
     /// Current frames whose detection could not be undistorted.
     pub detections_outside_lens: u64,
+    /// Tracked frames that needed ORB after all, when their pair was matched (a past
+    /// image without a chained homography, or an admission the tracker did not foresee).
+    pub late_orb: u64,
+    /// Past-image sides whose homography was carried by tracking (no ORB, no fit).
+    pub chained_sides: u64,
 }
 
 impl std::ops::AddAssign for ChainCounts {
@@ -225,6 +256,8 @@ impl std::ops::AddAssign for ChainCounts {
         self.fast_threshold_lowered += c.fast_threshold_lowered;
         self.keypoints_outside_lens += c.keypoints_outside_lens;
         self.detections_outside_lens += c.detections_outside_lens;
+        self.late_orb += c.late_orb;
+        self.chained_sides += c.chained_sides;
     }
 }
 
@@ -234,7 +267,8 @@ pub struct VisionChain {
     steps: Vec<Step>,
     config: MatchingConfig,
     estimator: EstimatorConfig,
-    orb: OrbExtractor,
+    /// Each UAV's frame-to-frame tracker and ORB extractor.
+    trackers: [FrameTracker; 2],
     pub(crate) rings: [KeyframeRing; 2],
     /// Each UAV's measured position smoothed over time, (t, position): the baseline
     /// constraint's ruler.
@@ -242,27 +276,57 @@ pub struct VisionChain {
     /// Guided-matching priors: the last ground homography from each current side to
     /// each keyframe.
     priors: HashMap<PriorKey, Prior>,
+    /// Past images whose fit failed on a current side's last ORB frame, with the
+    /// tracking epoch that frame began and the reason: not retried before the side's
+    /// next ORB frame.
+    failed: HashMap<PriorKey, (u64, MatchReject)>,
 }
 
-/// One past image to match, with the prior homography of each current side.
-type Job<'a> = ((Uav, &'a Keyframe), [Option<Matrix3<f64>>; 2]);
+/// One past image to match, with what guides each current side.
+type Job<'a> = ((Uav, &'a Keyframe), [Guide; 2]);
+
+/// What one current side knows of a past image before matching it.
+#[derive(Debug, Clone, Default)]
+struct Guide {
+    /// The last fitted ground homography, young enough to guide matching.
+    prior: Option<Matrix3<f64>>,
+    /// Tracked correspondences with the past image (`frame_tracking.rs`): the
+    /// current frame's followed ground points joined with the anchor's.
+    tracked: Option<(cv::Vector<cv::Point2f>, cv::Vector<cv::Point2f>)>,
+    /// Why the fit failed on this side's last ORB frame, if it did and this frame is
+    /// tracked from it.
+    failed: Option<MatchReject>,
+}
 
 /// (current side, keyframe's UAV, keyframe seq).
 type PriorKey = (usize, usize, u64);
 
 /// A ground homography, current → keyframe pixels, found with the current frame of
 /// time `t_s`.
-#[derive(Debug, Clone, Copy)]
+#[derive(Debug, Clone)]
 struct Prior {
     t_s: f64,
     homography: Matrix3<f64>,
+    /// The ground inliers of the last fresh fit, as the tracker follows them.
+    anchor: Option<Anchor>,
+}
+
+/// A past image's ground inliers handed to the current side's tracker: the tracker's
+/// ids (valid in `epoch` only) with their points in the past image, by increasing id.
+#[derive(Debug, Clone)]
+struct Anchor {
+    epoch: u64,
+    pairs: Arc<Vec<(u32, cv::Point2f)>>,
 }
 
 /// One past image's matching: the point (or why none), the homographies to keep as
 /// priors, and which sides were matched guided.
 struct PastResult {
     result: Result<PastMatch, MatchReject>,
+    /// Ground homographies fitted on this frame.
     homographies: [Option<Matrix3<f64>>; 2],
+    /// Of sides matched by ORB: ground inliers to track (current, past points).
+    seeds: [Vec<(cv::Point2f, cv::Point2f)>; 2],
     timing: ChainTiming,
     steps: Vec<Step>,
     /// Sides matched again with `retry_ratio_test`.
@@ -283,10 +347,11 @@ impl VisionChain {
         Ok(Self {
             counts: ChainCounts::default(),
             steps: Vec::new(),
-            orb: OrbExtractor::new(&config)?,
+            trackers: [FrameTracker::new(&config)?, FrameTracker::new(&config)?],
             rings: [ring(), ring()],
             smoothed: [None, None],
             priors: HashMap::new(),
+            failed: HashMap::new(),
             config,
             estimator,
         })
@@ -296,11 +361,82 @@ impl VisionChain {
         &self.rings
     }
 
-    /// ORB features of one frame (BGR or grey), at undistorted positions.
-    pub fn extract(&mut self, frame: &FrameInput) -> Result<Arc<Features>, ChainError> {
-        let (features, counts) = extract_undistorted(&mut self.orb, frame)?;
+    /// ORB features of one frame (BGR or grey), at undistorted positions, with no
+    /// tracking.
+    pub fn extract(&mut self, uav: Uav, frame: &FrameInput) -> Result<Arc<Features>, ChainError> {
+        let (features, counts) = self.trackers[uav.index()].extract(frame)?;
         self.add_counts(&counts);
         Ok(Arc::new(features))
+    }
+
+    /// One current frame of `uav`: tracked from the previous one, with ORB when the
+    /// chain foresees that its pair needs it ([`VisionChain::wants_features`]).
+    pub fn observe(
+        &mut self,
+        uav: Uav,
+        frame: &FrameInput,
+    ) -> Result<(Observed, TrackReport), ChainError> {
+        let want = self.wants_features(uav, frame.seq, frame.t_s, frame.pose.position());
+        let (observed, counts, report) = self.trackers[uav.index()].observe(frame, want)?;
+        self.add_counts(&counts);
+        Ok((observed, report))
+    }
+
+    /// The trackers, for a caller that observes both UAVs' frames on two threads (ask
+    /// [`VisionChain::wants_features`] first).
+    pub fn trackers_mut(&mut self) -> &mut [FrameTracker; 2] {
+        &mut self.trackers
+    }
+
+    /// Whether `frame` of `uav` should run ORB rather than only be tracked: the ring
+    /// may admit it, or a past image it will be matched with has no homography that
+    /// tracking can carry to it. A wrong guess costs time, never accuracy: a pair that
+    /// needs features it lacks gets them late ([`ChainCounts::late_orb`]).
+    pub fn wants_features(
+        &self,
+        uav: Uav,
+        seq: u64,
+        t_s: f64,
+        position: nalgebra::Point3<f64>,
+    ) -> bool {
+        let Some((epoch, _)) = self.trackers[uav.index()].next_step(seq) else {
+            return true;
+        };
+        let here = self.predicted_baseline(uav, t_s, position);
+        if self.rings[uav.index()].would_admit(&here) {
+            return true;
+        }
+        let wanted = self.config.images_per_uav - 1;
+        [Uav::Left, Uav::Right].into_iter().any(|ring_uav| {
+            let at = if ring_uav == uav {
+                here
+            } else {
+                match self.smoothed[ring_uav.index()] {
+                    Some((_, p)) => p,
+                    None => return false,
+                }
+            };
+            self.rings[ring_uav.index()]
+                .select(&at, seq, wanted)
+                .iter()
+                .any(|kf| {
+                    let key = (uav.index(), ring_uav.index(), kf.seq);
+                    let anchor = self.priors.get(&key).and_then(|p| p.anchor.as_ref());
+                    let known = anchor.is_some_and(|a| a.epoch == epoch)
+                        || self.failed.get(&key).is_some_and(|(e, _)| *e == epoch);
+                    !known
+                })
+        })
+    }
+
+    /// The smoothed position `track` would give `uav` at this frame.
+    fn predicted_baseline(
+        &self,
+        uav: Uav,
+        t_s: f64,
+        p: nalgebra::Point3<f64>,
+    ) -> nalgebra::Point3<f64> {
+        smoothed_next(self.smoothed[uav.index()], t_s, p, self.config.baseline_smoothing_s).1
     }
 
     /// Adds counts from work done outside the chain (the service's second ORB thread).
@@ -326,12 +462,15 @@ impl VisionChain {
     ) -> Result<ChainResult, ChainError> {
         let mut timing = ChainTiming::default();
         let t = Instant::now();
-        let features = [self.extract(left)?, self.extract(right)?];
+        let mut observed = [
+            self.observe(Uav::Left, left)?.0,
+            self.observe(Uav::Right, right)?.0,
+        ];
         timing.orb_us = micros(t);
         let (left, right) = (left.meta(), right.meta());
         let mut rejections = Vec::new();
         let matched =
-            self.match_current([&left, &right], &features, &mut timing, &mut rejections)?;
+            self.match_current([&left, &right], &mut observed, &mut timing, &mut rejections)?;
         let outcome = match matched {
             MatchOutcome::NoDetection => ChainOutcome::NoDetection,
             MatchOutcome::NotEnoughHistory { past } => ChainOutcome::NotEnoughHistory { past },
@@ -342,7 +481,7 @@ impl VisionChain {
                 ChainOutcome::Located(Box::new(located))
             }
         };
-        self.admit([&left, &right], &features);
+        self.admit([&left, &right], &mut observed)?;
         Ok(ChainResult {
             outcome,
             rejections,
@@ -359,16 +498,8 @@ impl VisionChain {
         let tau = self.config.baseline_smoothing_s;
         for uav in [Uav::Left, Uav::Right] {
             let f = frames[uav.index()];
-            let p = f.pose.position();
             let slot = &mut self.smoothed[uav.index()];
-            *slot = Some(match *slot {
-                Some((t0, s)) if f.t_s > t0 && tau > 0.0 => {
-                    let a = 1.0 - (-(f.t_s - t0) / tau).exp();
-                    (f.t_s, s + (p - s) * a)
-                }
-                Some((t0, s)) if f.t_s <= t0 && f.t_s > t0 - 1.0 => (t0, s),
-                _ => (f.t_s, p),
-            });
+            *slot = Some(smoothed_next(*slot, f.t_s, f.pose.position(), tau));
         }
     }
 
@@ -377,12 +508,26 @@ impl VisionChain {
     }
 
     /// Offers the current pair to the keyframe rings (the baseline constraint decides).
-    /// Returns, per UAV, whether the frame was admitted.
-    pub fn admit(&mut self, frames: [&FrameMeta; 2], features: &[Arc<Features>; 2]) -> [bool; 2] {
+    /// Returns, per UAV, whether the frame was admitted. A tracked frame the ring admits
+    /// gets its ORB features now if it has none.
+    pub fn admit(
+        &mut self,
+        frames: [&FrameMeta; 2],
+        observed: &mut [Observed; 2],
+    ) -> Result<[bool; 2], ChainError> {
         let mut admitted = [false; 2];
         for uav in [Uav::Left, Uav::Right] {
             let frame = frames[uav.index()];
             let baseline_position = self.baseline_position(uav, frame);
+            if !self.rings[uav.index()].would_admit(&baseline_position) {
+                continue;
+            }
+            let counts =
+                self.trackers[uav.index()].ensure_features(&mut observed[uav.index()], frame)?;
+            self.counts += counts;
+            let Some(features) = observed[uav.index()].features.clone() else {
+                continue;
+            };
             admitted[uav.index()] = self.rings[uav.index()].offer(Keyframe {
                 seq: frame.seq,
                 t_s: frame.t_s,
@@ -392,10 +537,10 @@ impl VisionChain {
                 distortion: frame.distortion,
                 width: frame.width,
                 height: frame.height,
-                features: features[uav.index()].clone(),
+                features,
             });
         }
-        admitted
+        Ok(admitted)
     }
 
     /// Section 2.3 for the current pair: the corresponding point of the current target
@@ -404,7 +549,7 @@ impl VisionChain {
     pub fn match_current(
         &mut self,
         current: [&FrameMeta; 2],
-        features: &[Arc<Features>; 2],
+        observed: &mut [Observed; 2],
         timing: &mut ChainTiming,
         rejections: &mut Vec<(Uav, u64, MatchReject)>,
     ) -> Result<MatchOutcome, ChainError> {
@@ -426,9 +571,12 @@ impl VisionChain {
         };
         let detections = [pl, pr];
         let wanted = self.config.images_per_uav - 1;
+        let positions =
+            [Uav::Left, Uav::Right].map(|uav| self.baseline_position(uav, current[uav.index()]));
+        let rings = &self.rings;
         let selected: [Vec<&Keyframe>; 2] = [Uav::Left, Uav::Right].map(|uav| {
             let frame = current[uav.index()];
-            self.rings[uav.index()].select(&self.baseline_position(uav, frame), frame.seq, wanted)
+            rings[uav.index()].select(&positions[uav.index()], frame.seq, wanted)
         });
         if selected.iter().any(|s| s.len() < wanted) {
             return Ok(MatchOutcome::NotEnoughHistory {
@@ -456,18 +604,28 @@ impl VisionChain {
             .flat_map(|uav| selected[uav.index()].iter().map(move |kf| (uav, *kf)))
             .collect();
         let metas = [*current[0], *current[1]];
-        let config = &self.config;
-        let priors: Vec<[Option<Matrix3<f64>>; 2]> = jobs
+        let guides: Vec<[Guide; 2]> = jobs
             .iter()
             .map(|(uav, kf)| {
                 [0, 1].map(|side| {
-                    let prior = self.priors.get(&(side, uav.index(), kf.seq))?;
-                    let age = metas[side].t_s - prior.t_s;
-                    let fresh = (0.0..=config.guided_max_age_s).contains(&age);
-                    (fresh && config.guided_radius_px > 0.0).then_some(prior.homography)
+                    self.guide(side, *uav, kf.seq, &metas[side], observed[side].motion.as_ref())
                 })
             })
             .collect();
+        // A side without features is served by tracking alone only if every past image
+        // has tracked correspondences for it; else ORB runs on it now.
+        let t = Instant::now();
+        for side in 0..2 {
+            let unknown = |g: &[Guide; 2]| g[side].tracked.is_none() && g[side].failed.is_none();
+            if observed[side].features.is_none() && guides.iter().any(unknown) {
+                let counts = self.trackers[side].ensure_features(&mut observed[side], current[side])?;
+                self.counts += counts;
+            }
+        }
+        timing.orb_us += micros(t);
+        let features = [observed[0].features.clone(), observed[1].features.clone()];
+        let config = &self.config;
+        let features = &features;
         let run = |chunk: &[Job]| -> Vec<PastResult> {
             let mut neighbours = Vec::with_capacity(config.orb_features as usize);
             chunk
@@ -486,7 +644,7 @@ impl VisionChain {
                 })
                 .collect()
         };
-        let work: Vec<_> = jobs.iter().copied().zip(priors).collect();
+        let work: Vec<_> = jobs.iter().copied().zip(guides).collect();
         let threads = self.config.match_threads.clamp(1, work.len().max(1));
         let per_thread = work.len().div_ceil(threads);
         let results: Vec<PastResult> = if threads > 1 {
@@ -512,6 +670,8 @@ impl VisionChain {
         let mut past = Vec::new();
         let mut past_obs = Vec::new();
         let mut new_priors: Vec<(PriorKey, Prior)> = Vec::new();
+        let mut seeds: [Vec<(PriorKey, Vec<(cv::Point2f, cv::Point2f)>)>; 2] = Default::default();
+        let mut failures: [Vec<(PriorKey, MatchReject)>; 2] = Default::default();
         let mut counts = ChainCounts::default();
         let mut steps = Vec::new();
         for ((uav, kf), r) in jobs.iter().zip(results) {
@@ -525,17 +685,35 @@ impl VisionChain {
             timing.matching_us += t.matching_us;
             timing.fundamental_us += t.fundamental_us;
             timing.transfer_us += t.transfer_us;
-            // A side without a new homography (a failed fit) keeps its old prior,
-            // which ages out.
+            // A side without a new homography (a failed fit) keeps its old prior, which
+            // ages out; a tracked side keeps its anchor.
             for (side, h) in r.homographies.iter().enumerate() {
                 if let Some(homography) = h {
-                    let t_s = metas[side].t_s;
-                    let prior = Prior {
-                        t_s,
-                        homography: *homography,
+                    let key = (side, uav.index(), kf.seq);
+                    let anchor = if r.seeds[side].is_empty() {
+                        self.priors.get(&key).and_then(|p| p.anchor.clone())
+                    } else {
+                        None
                     };
-                    new_priors.push(((side, uav.index(), kf.seq), prior));
+                    let prior = Prior {
+                        t_s: metas[side].t_s,
+                        homography: *homography,
+                        anchor,
+                    };
+                    new_priors.push((key, prior));
                 }
+            }
+            for side in 0..2 {
+                let key = (side, uav.index(), kf.seq);
+                if !r.seeds[side].is_empty() {
+                    seeds[side].push((key, r.seeds[side].clone()));
+                }
+                if let (true, Err(reason)) = (features[side].is_some(), &r.result) {
+                    failures[side].push((key, *reason));
+                }
+            }
+            if let Ok(m) = &r.result {
+                counts.chained_sides += m.chained.iter().filter(|c| **c).count() as u64;
             }
             match r.result {
                 Ok(m) => {
@@ -549,9 +727,14 @@ impl VisionChain {
         self.counts += counts;
         self.steps = steps;
         self.priors.extend(new_priors);
+        for (side, (side_seeds, side_failures)) in seeds.into_iter().zip(failures).enumerate() {
+            self.seed(side, current[side], side_seeds, side_failures);
+        }
         // Forget keyframes the rings have evicted.
         let rings = &self.rings;
         self.priors
+            .retain(|&(_, uav, seq), _| rings[uav].iter().any(|kf| kf.seq == seq));
+        self.failed
             .retain(|&(_, uav, seq), _| rings[uav].iter().any(|kf| kf.seq == seq));
 
         Ok(MatchOutcome::Matched(Box::new(MatchedSet {
@@ -559,6 +742,129 @@ impl VisionChain {
             past_observations: past_obs,
             past,
         })))
+    }
+}
+
+impl VisionChain {
+    /// What side `side`'s current frame knows of keyframe `seq` of `uav`: the last
+    /// fitted homography if young enough to guide matching, and the tracked
+    /// correspondences if this frame followed the points of that keyframe's anchor.
+    fn guide(
+        &self,
+        side: usize,
+        uav: Uav,
+        seq: u64,
+        frame: &FrameMeta,
+        motion: Option<&Motion>,
+    ) -> Guide {
+        let failed = match (self.failed.get(&(side, uav.index(), seq)), motion) {
+            (Some((epoch, reason)), Some(m)) if *epoch == m.epoch => Some(*reason),
+            _ => None,
+        };
+        let Some(prior) = self.priors.get(&(side, uav.index(), seq)) else {
+            return Guide {
+                failed,
+                ..Guide::default()
+            };
+        };
+        let config = &self.config;
+        let age = frame.t_s - prior.t_s;
+        let fresh = (0.0..=config.guided_max_age_s).contains(&age);
+        let tracked = match (&prior.anchor, motion) {
+            (Some(a), Some(m)) if a.epoch == m.epoch => Some(join(&a.pairs, &m.tracked)),
+            _ => None,
+        };
+        Guide {
+            prior: (fresh && config.guided_radius_px > 0.0).then_some(prior.homography),
+            tracked,
+            failed,
+        }
+    }
+
+    /// Hands side `side`'s ground inliers (each past image's, current ↔ past) to its
+    /// tracker, keeps each past image's share as its anchor, and records the past
+    /// images whose fit failed so that tracked frames do not ask for ORB again.
+    fn seed(
+        &mut self,
+        side: usize,
+        frame: &FrameMeta,
+        seeds: Vec<(PriorKey, Vec<(cv::Point2f, cv::Point2f)>)>,
+        failures: Vec<(PriorKey, MatchReject)>,
+    ) {
+        if seeds.is_empty() {
+            return;
+        }
+        // One id per distinct current point (a keypoint can be an inlier with several
+        // past images).
+        let mut ids: HashMap<(u32, u32), u32> = HashMap::new();
+        let mut points = Vec::new();
+        let mut anchors = Vec::with_capacity(seeds.len());
+        for (key, pairs) in seeds {
+            let mut anchor: Vec<(u32, cv::Point2f)> = pairs
+                .iter()
+                .map(|(c, p)| {
+                    let id = *ids.entry((c.x.to_bits(), c.y.to_bits())).or_insert_with(|| {
+                        points.push(*c);
+                        points.len() as u32 - 1
+                    });
+                    (id, *p)
+                })
+                .collect();
+            anchor.sort_by_key(|(id, _)| *id);
+            anchor.dedup_by_key(|(id, _)| *id);
+            anchors.push((key, anchor));
+        }
+        let epoch =
+            self.trackers[side].seed(frame.seq, &points, &frame.intrinsics, &frame.distortion);
+        for (key, pairs) in anchors {
+            if let Some(prior) = self.priors.get_mut(&key) {
+                prior.anchor = epoch.map(|epoch| Anchor {
+                    epoch,
+                    pairs: Arc::new(pairs),
+                });
+            }
+        }
+        if let Some(epoch) = epoch {
+            for (key, reason) in failures {
+                self.failed.insert(key, (epoch, reason));
+            }
+        }
+    }
+}
+
+/// Tracked correspondences: the anchor's past points joined by id with the points the
+/// current frame followed (both sorted by id).
+fn join(
+    anchor: &[(u32, cv::Point2f)],
+    tracked: &TrackedPoints,
+) -> (cv::Vector<cv::Point2f>, cv::Vector<cv::Point2f>) {
+    let (mut current, mut past) = (cv::Vector::new(), cv::Vector::new());
+    let mut a = anchor.iter().peekable();
+    for (id, point) in tracked.ids.iter().zip(&tracked.points) {
+        while a.next_if(|(i, _)| i < id).is_some() {}
+        if let Some((_, p)) = a.next_if(|(i, _)| i == id) {
+            current.push(*point);
+            past.push(*p);
+        }
+    }
+    (current, past)
+}
+
+/// One step of the exponential smoothing of a UAV's measured position (see
+/// `VisionChain::track`): the slot after a frame at `t_s` measured at `p`.
+fn smoothed_next(
+    slot: Option<(f64, nalgebra::Point3<f64>)>,
+    t_s: f64,
+    p: nalgebra::Point3<f64>,
+    tau: f64,
+) -> (f64, nalgebra::Point3<f64>) {
+    match slot {
+        Some((t0, s)) if t_s > t0 && tau > 0.0 => {
+            let a = 1.0 - (-(t_s - t0) / tau).exp();
+            (t_s, s + (p - s) * a)
+        }
+        Some((t0, s)) if t_s <= t0 && t_s > t0 - 1.0 => (t0, s),
+        _ => (t_s, p),
     }
 }
 
@@ -593,14 +899,15 @@ fn match_past(
     kf: &Keyframe,
     current: &[FrameMeta; 2],
     detections: [[f64; 2]; 2],
-    features: &[Arc<Features>; 2],
-    priors: &[Option<Matrix3<f64>>; 2],
+    features: &[Option<Arc<Features>>; 2],
+    guides: &[Guide; 2],
     neighbours: &mut Vec<Option<crate::hamming::Nearest2>>,
 ) -> PastResult {
     let job_start = monotonic_ns();
     let mut out = PastResult {
         result: Err(MatchReject::FundamentalFailed),
         homographies: [None, None],
+        seeds: [Vec::new(), Vec::new()],
         timing: ChainTiming::default(),
         steps: Vec::new(),
         retried: [false, false],
@@ -614,10 +921,39 @@ fn match_past(
     };
     let mut geometry: [Option<PairGeometry>; 2] = [None, None];
     let mut guided = [false, false];
+    let mut chained = [false, false];
     for side in 0..2 {
         // The vertical in the current camera's frame: roll and pitch only (the yaw and
         // its unknown bias turn about it).
         let up = camera_to_world(current[side].pose.attitude()).transpose() * Vector3::z();
+        let intrinsics = (&current[side].intrinsics, &kf.intrinsics);
+        let Some(features) = &features[side] else {
+            // No features: `match_current` made sure this side has tracked
+            // correspondences, fitted like matches.
+            let t = Instant::now();
+            let t_ns = monotonic_ns();
+            let result = match (&guides[side].tracked, guides[side].failed) {
+                (Some((a, b)), _) => estimate_fundamental(a, b, intrinsics, &up, config),
+                // Failed on this side's last ORB frame: not retried until the next.
+                (None, Some(reason)) => Err(reason),
+                (None, None) => Err(MatchReject::FundamentalFailed),
+            };
+            out.timing.fundamental_us += micros(t);
+            out.steps.push(step("F", t_ns));
+            match result {
+                Ok(g) => {
+                    chained[side] = true;
+                    out.homographies[side] = g.homography;
+                    geometry[side] = Some(g);
+                    continue;
+                }
+                Err(reason) => {
+                    out.result = Err(reason);
+                    out.steps.push(step("past", job_start));
+                    return out;
+                }
+            }
+        };
         let mut fit = |guide: Option<&Matrix3<f64>>,
                        ratio: f32,
                        timing: &mut ChainTiming,
@@ -626,38 +962,44 @@ fn match_past(
             let t_ns = monotonic_ns();
             let (a, b) = match guide {
                 Some(h) => match_points_guided(
-                    &features[side],
+                    features,
                     &kf.features,
                     h,
                     config.guided_radius_px as f32,
                     ratio,
                     neighbours,
                 ),
-                None => match_points(&features[side], &kf.features, ratio, neighbours),
+                None => match_points(features, &kf.features, ratio, neighbours),
             };
             timing.matching_us += micros(t);
             steps.push(step("match", t_ns));
             let t = Instant::now();
             let t_ns = monotonic_ns();
-            let intrinsics = (&current[side].intrinsics, &kf.intrinsics);
-            let result = estimate_fundamental(&a, &b, intrinsics, &up, config);
+            let mut mask = cv::Mat::default();
+            let result = estimate_fundamental_masked(&a, &b, intrinsics, &up, config, &mut mask);
             timing.fundamental_us += micros(t);
             steps.push(step("F", t_ns));
-            result
+            let seeds = match &result {
+                Ok(g) if config.track_between_orb && g.model == Some(PlaneModel::GroundPlane) => {
+                    ground_seeds(&a, &b, &mask, config.track_points_per_image)
+                }
+                _ => Vec::new(),
+            };
+            (result, seeds)
         };
-        let mut result = Err(MatchReject::FundamentalFailed);
-        if let Some(h) = &priors[side] {
+        let mut result = (Err(MatchReject::FundamentalFailed), Vec::new());
+        if let Some(h) = &guides[side].prior {
             result = fit(Some(h), config.ratio_test, &mut out.timing, &mut out.steps);
-            guided[side] = result.is_ok();
+            guided[side] = result.0.is_ok();
         }
-        if result.is_err() {
+        if result.0.is_err() {
             result = fit(None, config.ratio_test, &mut out.timing, &mut out.steps);
         }
         // Too little support under the strict ratio: a scene with repeated texture
         // (windows, lane marks) loses its good matches to the ratio test. Once more,
         // looser; the robust fit and `min_inliers` still judge the result.
         let starved = matches!(
-            result,
+            result.0,
             Err(MatchReject::TooFewMatches { .. } | MatchReject::TooFewInliers { .. })
         );
         if starved && config.retry_ratio_test > config.ratio_test {
@@ -669,6 +1011,8 @@ fn match_past(
             );
             out.retried[side] = true;
         }
+        let (result, seeds) = result;
+        out.seeds[side] = seeds;
         match result {
             Ok(g) => {
                 out.homographies[side] = g.homography;
@@ -711,6 +1055,26 @@ fn match_past(
         fundamental: [gl.f, gr.f],
         models: [gl.model, gr.model],
         guided,
+        chained,
     });
     out
+}
+
+/// Up to `most` ground inliers of a fit (a stride through them, so they stay spread),
+/// as (current, past) points: what the tracker follows until the next ORB frame.
+fn ground_seeds(
+    current: &cv::Vector<cv::Point2f>,
+    past: &cv::Vector<cv::Point2f>,
+    mask: &cv::Mat,
+    most: usize,
+) -> Vec<(cv::Point2f, cv::Point2f)> {
+    let inliers: Vec<usize> = (0..current.len())
+        .filter(|&i| mask.at::<u8>(i as i32).is_ok_and(|m| *m != 0))
+        .collect();
+    let stride = inliers.len().div_ceil(most.max(1)).max(1);
+    inliers
+        .iter()
+        .step_by(stride)
+        .filter_map(|&i| Some((current.get(i).ok()?, past.get(i).ok()?)))
+        .collect()
 }

@@ -136,6 +136,22 @@ pub struct MatchingConfig {
     pub min_line_angle_deg: f64,
     /// A transferred point must lie at least this far inside the image.
     pub border_px: f64,
+    /// Between ORB frames, follow each camera's ground matches frame to frame (KLT)
+    /// instead of running ORB and Hamming matching on every frame
+    /// (`frame_tracking.rs`, issue #15); F is still fitted afresh on every frame. Off =
+    /// ORB and matching on every frame, as before.
+    pub track_between_orb: bool,
+    /// ORB and Hamming matching at least every this many frames of a UAV while
+    /// tracking.
+    pub track_refresh_frames: u32,
+    /// Ground inliers of each past image's fit handed to the tracker (a stride through
+    /// them), at most.
+    pub track_points_per_image: usize,
+    /// Fewer followed points than this loses the track (ORB again).
+    pub track_min_inliers: usize,
+    /// Followed points must agree on one frame-to-frame homography within this many
+    /// pixels.
+    pub track_ransac_px: f64,
 }
 
 impl Default for MatchingConfig {
@@ -173,6 +189,11 @@ impl Default for MatchingConfig {
             min_inliers: 30,
             min_line_angle_deg: 30.0,
             border_px: 2.0,
+            track_between_orb: true,
+            track_refresh_frames: 6,
+            track_points_per_image: 80,
+            track_min_inliers: 30,
+            track_ransac_px: 1.0,
         }
     }
 }
@@ -217,7 +238,12 @@ impl MatchingConfig {
             && (1..=64).contains(&self.match_threads)
             && self.min_inliers >= 8
             && self.min_line_angle_deg >= 0.0
-            && self.border_px >= 0.0;
+            && self.border_px >= 0.0
+            && (1..=1000).contains(&self.track_refresh_frames)
+            && (8..=10_000).contains(&self.track_points_per_image)
+            && self.track_min_inliers >= 8
+            && self.track_ransac_px > 0.0
+            && self.track_ransac_px.is_finite();
         if ok {
             Ok(())
         } else {

@@ -127,11 +127,23 @@ pub fn estimate_fundamental(
     up: &Vector3<f64>,
     config: &MatchingConfig,
 ) -> Result<PairGeometry, MatchReject> {
+    estimate_fundamental_masked(current, past, intrinsics, up, config, &mut cv::Mat::default())
+}
+
+/// [`estimate_fundamental`], with `mask` marking the inliers of the model used (the
+/// ground plane's, for a `ground_plane` F from the level plane).
+pub fn estimate_fundamental_masked(
+    current: &cv::Vector<cv::Point2f>,
+    past: &cv::Vector<cv::Point2f>,
+    intrinsics: (&Intrinsics, &Intrinsics),
+    up: &Vector3<f64>,
+    config: &MatchingConfig,
+    mask: &mut cv::Mat,
+) -> Result<PairGeometry, MatchReject> {
     let matches = current.len();
     if matches < config.min_inliers.max(8) {
         return Err(MatchReject::TooFewMatches { matches });
     }
-    let mut mask = cv::Mat::default();
     let fail = |_| MatchReject::FundamentalFailed;
     let (f, model, homography) = match config.fundamental {
         FundamentalMethod::Ransac8Point => {
@@ -142,25 +154,25 @@ pub fn estimate_fundamental(
                 config.ransac_threshold_px,
                 config.ransac_confidence,
                 config.ransac_max_iterations,
-                &mut mask,
+                mask,
             )
             .map_err(fail)?;
             (single_solution(&f)?, None, None)
         }
         FundamentalMethod::Magsac => {
             let params = usac_params(config, config.ransac_threshold_px).map_err(fail)?;
-            let f = opencv::calib3d::find_fundamental_mat_2(current, past, &mut mask, params)
+            let f = opencv::calib3d::find_fundamental_mat_2(current, past, mask, params)
                 .map_err(fail)?;
             (single_solution(&f)?, None, None)
         }
         FundamentalMethod::Essential => (
-            essential_as_fundamental(current, past, intrinsics, config, &mut mask)?,
+            essential_as_fundamental(current, past, intrinsics, config, mask)?,
             None,
             None,
         ),
         FundamentalMethod::GroundPlane => {
             let (f, model, h) =
-                ground_plane_fundamental(current, past, intrinsics, up, config, &mut mask)?;
+                ground_plane_fundamental(current, past, intrinsics, up, config, mask)?;
             (
                 f,
                 Some(model),
@@ -168,7 +180,7 @@ pub fn estimate_fundamental(
             )
         }
     };
-    let inliers = cv::count_non_zero(&mask).map_err(fail)? as usize;
+    let inliers = cv::count_non_zero(mask).map_err(fail)? as usize;
     if inliers < config.min_inliers {
         return Err(MatchReject::TooFewInliers { inliers });
     }

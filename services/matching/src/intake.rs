@@ -9,21 +9,20 @@
 //! plain `(header, bytes)` views, [`Intake::on_detection`] per detection and
 //! [`Intake::next_set`] until it returns `None`.
 
-use crate::chain::{extract_undistorted, ChainCounts, FrameInput, FrameMeta, MatchOutcome};
-use crate::features::{Features, OrbExtractor};
+use crate::chain::{ChainCounts, FrameInput, FrameMeta, MatchOutcome};
+use crate::frame_tracking::{FrameTracker, Observed, TrackReport};
 use crate::ring_store::RingStore;
 use crate::{ChainTiming, MatchingConfig, VisionChain};
 use anyhow::Result;
 use detection::frame_view::frame_mat;
 use geolocation::EstimatorConfig;
 use shared_types::clock::{elapsed_us, monotonic_ns};
-use shared_types::conventions::Intrinsics;
+use shared_types::conventions::{Intrinsics, Uav};
 use shared_types::lens::Distortion;
 use shared_types::messages::{DetectionMsg, FrameHeader, ObservationSetMsg, MAX_OBSERVATIONS};
 use shared_types::stats::StageStats;
 use shared_types::trace::Tracer;
 use std::collections::BTreeMap;
-use std::sync::Arc;
 
 /// Pairs older than this many sequence numbers behind the newest are abandoned.
 const MAX_PENDING_PAIRS: u64 = 4;
@@ -33,7 +32,7 @@ pub type FrameView<'a> = (FrameHeader, &'a [u8]);
 
 #[derive(Default)]
 struct Pending {
-    frames: [Option<(FrameHeader, Arc<Features>)>; 2],
+    frames: [Option<(FrameHeader, Observed)>; 2],
     detections: [Option<DetectionMsg>; 2],
     orb_us: u64,
 }
@@ -43,7 +42,6 @@ pub struct Intake {
     /// acquisition: one acknowledgement per pair, for `--rate max` flow control.
     pub acks: u64,
     pub chain: VisionChain,
-    worker_orb: OrbExtractor,
     pending: BTreeMap<u64, Pending>,
     pub stats: StageStats,
     /// Per-frame spans (`--trace`; off by default).
@@ -53,8 +51,8 @@ pub struct Intake {
     unsaved: [bool; 2],
 }
 
-/// Features of the left frame from the pool thread, with its counts.
-type LeftFeatures = (FrameHeader, Arc<Features>, ChainCounts);
+/// One frame observed (tracked, and ORB where wanted), with its counts.
+type Seen = (FrameHeader, Observed, ChainCounts, TrackReport);
 
 /// A frame's pixels with what its header says (no detection yet: ORB does not need it).
 fn input<'a>(header: &FrameHeader, mat: &'a opencv::core::Mat) -> FrameInput<'a> {
@@ -97,7 +95,6 @@ impl Intake {
         }
         Ok(Self {
             acks: 0,
-            worker_orb: OrbExtractor::new(&config)?,
             chain: VisionChain::new(config, estimator)?,
             pending: BTreeMap::new(),
             stats: StageStats::new("matching"),
@@ -138,65 +135,68 @@ impl Intake {
         Ok(())
     }
 
-    /// ORB on the newest frame of each UAV (left on a pool thread, right on this one),
-    /// waiting in the pending pairs for their detections. A frame the header does not
-    /// describe is counted (`bad_frames`) and dropped.
+    /// The newest frame of each UAV observed (left on a pool thread, right on this
+    /// one): tracked from the UAV's previous frame, with ORB where the chain foresees
+    /// the pair needs it (`frame_tracking.rs`), then waiting in the pending pairs for
+    /// their detections. A frame the header does not describe is counted
+    /// (`bad_frames`) and dropped.
     pub fn extract(&mut self, views: [Option<FrameView>; 2]) {
         let start = monotonic_ns();
         let [left, right] = views;
-        let (chain, worker_orb) = (&mut self.chain, &mut self.worker_orb);
-        let extract_right =
-            |chain: &mut VisionChain| -> Result<Option<(FrameHeader, Arc<Features>)>> {
-                let Some((header, payload)) = right else {
-                    return Ok(None);
-                };
-                let mat = frame_mat(&header, payload)?;
-                Ok(Some((header, chain.extract(&input(&header, &mat))?)))
-            };
-        let extract_left = |orb: &mut OrbExtractor| -> Result<Option<LeftFeatures>> {
-            let Some((header, payload)) = left else {
+        let chain = &self.chain;
+        let wants = |uav: Uav, view: &Option<FrameView>| {
+            view.is_some_and(|(h, _)| chain.wants_features(uav, h.seq, h.t_s, h.pose.position()))
+        };
+        let want = [wants(Uav::Left, &left), wants(Uav::Right, &right)];
+        let [left_tracker, right_tracker] = self.chain.trackers_mut();
+        let observe = |tracker: &mut FrameTracker, view: Option<FrameView>, want: bool| {
+            let Some((header, payload)) = view else {
                 return Ok(None);
             };
             let mat = frame_mat(&header, payload)?;
-            let (features, counts) = extract_undistorted(orb, &input(&header, &mat))?;
-            Ok(Some((header, Arc::new(features), counts)))
+            let (observed, counts, report) = tracker.observe(&input(&header, &mat), want)?;
+            anyhow::Ok(Some((header, observed, counts, report)))
         };
         // Left on a pool thread, right on this one. The pool's threads live as long as
         // the process: OpenCV 4.6 keeps per-thread data (cv::TLSDataContainer, from
         // parallel_for_) of every thread that ever called it, so a thread per pair
         // leaked ~15 KB/s (heaptrack; issue #13).
-        let (l, r) = if left.is_some() && right.is_some() {
-            let mut l = None;
-            let r = rayon::in_place_scope(|scope| {
-                scope.spawn(|_| l = Some(extract_left(worker_orb)));
-                extract_right(chain)
-            });
-            (
-                l.unwrap_or_else(|| Err(anyhow::anyhow!("the left ORB task did not run"))),
-                r,
-            )
-        } else {
-            (extract_left(worker_orb), extract_right(chain))
-        };
+        let (l, r): (Result<Option<Seen>>, Result<Option<Seen>>) =
+            if left.is_some() && right.is_some() {
+                let mut l = None;
+                let r = rayon::in_place_scope(|scope| {
+                    scope.spawn(|_| l = Some(observe(left_tracker, left, want[0])));
+                    observe(right_tracker, right, want[1])
+                });
+                (
+                    l.unwrap_or_else(|| Err(anyhow::anyhow!("the left ORB task did not run"))),
+                    r,
+                )
+            } else {
+                (
+                    observe(left_tracker, left, want[0]),
+                    observe(right_tracker, right, want[1]),
+                )
+            };
         let orb_end = monotonic_ns();
         let orb_us = elapsed_us(start, orb_end);
-        let l = l.map(|found| {
-            found.map(|(header, features, counts)| {
-                self.chain.add_counts(&counts);
-                (header, features)
-            })
-        });
         for (uav, result) in [l, r].into_iter().enumerate() {
             match result {
-                Ok(Some((header, features))) => {
+                Ok(Some((header, observed, counts, report))) => {
+                    self.chain.add_counts(&counts);
+                    let name = if report.orb { "orb" } else { "track" };
+                    self.stats.count(if report.orb { "orb_frames" } else { "tracked_only_frames" }, 1);
+                    if report.lost {
+                        self.stats.count("track_lost", 1);
+                    }
                     let slot = self.pending.entry(header.seq).or_default();
-                    slot.frames[uav] = Some((header, features));
+                    slot.frames[uav] = Some((header, observed));
                     slot.orb_us += orb_us;
-                    self.stats.record("orb", orb_us);
+                    self.stats.record(name, orb_us);
                     let uav = Some(header.uav);
                     self.trace
                         .span("wait", header.seq, uav, header.published_ns, start);
-                    self.trace.span("orb", header.seq, uav, start, orb_end);
+                    self.trace.span(name, header.seq, uav, start, orb_end);
                 }
                 Ok(None) => {}
                 Err(e) => {
@@ -234,25 +234,23 @@ impl Intake {
         }
         let seq = complete?;
         let pair = self.pending.remove(&seq)?;
-        let (Some((hl, fl)), Some((hr, fr)), Some(dl), Some(dr)) = (
-            pair.frames[0].clone(),
-            pair.frames[1].clone(),
-            pair.detections[0],
-            pair.detections[1],
-        ) else {
+        let [Some((hl, ol)), Some((hr, or))] = pair.frames else {
+            return None;
+        };
+        let (Some(dl), Some(dr)) = (pair.detections[0], pair.detections[1]) else {
             return None;
         };
         self.stats.count("pairs", 1);
         self.acks += 1;
         let start = monotonic_ns();
         let (ml, mr) = (meta(&hl, &dl), meta(&hr, &dr));
-        let features = [fl, fr];
+        let mut observed = [ol, or];
         let mut timing = ChainTiming::default();
         let mut rejections = Vec::new();
         let outcome =
             match self
                 .chain
-                .match_current([&ml, &mr], &features, &mut timing, &mut rejections)
+                .match_current([&ml, &mr], &mut observed, &mut timing, &mut rejections)
             {
                 Ok(outcome) => outcome,
                 Err(e) => {
@@ -274,6 +272,8 @@ impl Intake {
             ("fast_threshold_lowered", c.fast_threshold_lowered),
             ("keypoints_outside_lens", c.keypoints_outside_lens),
             ("detections_outside_lens", c.detections_outside_lens),
+            ("late_orb", c.late_orb),
+            ("chained_sides", c.chained_sides),
         ] {
             if n > 0 {
                 self.stats.count(name, n);
@@ -319,7 +319,14 @@ impl Intake {
                 Some(msg)
             }
         };
-        let admitted = self.chain.admit([&ml, &mr], &features);
+        let admitted = match self.chain.admit([&ml, &mr], &mut observed) {
+            Ok(admitted) => admitted,
+            Err(e) => {
+                self.stats.count("match_failed", 1);
+                tracing::warn!(pair = seq, "admission failed: {e}");
+                [false; 2]
+            }
+        };
         self.unsaved = [self.unsaved[0] | admitted[0], self.unsaved[1] | admitted[1]];
         let end = monotonic_ns();
         let match_us = elapsed_us(start, end);

@@ -4,13 +4,16 @@
 //! Each UAV keeps a ring of keyframes admitted by the baseline constraint T_re, with ORB
 //! features cached at admission ([`ring`]). For each past image, F_Ln and F_Rn are
 //! estimated from ORB matches, and the current target pixel's epipolar lines meet at
-//! its corresponding point ([`epipolar`], eq. 24–28). [`chain`] runs everything,
-//! through the consistency filter and the estimator.
+//! its corresponding point ([`epipolar`], eq. 24–28). Between ORB frames each camera
+//! is tracked frame to frame and the fitted homographies are carried along
+//! ([`frame_tracking`]). [`chain`] runs everything, through the consistency filter and
+//! the estimator.
 
 pub mod chain;
 pub mod config;
 pub mod epipolar;
 pub mod features;
+pub mod frame_tracking;
 pub mod grid;
 pub mod ground_plane;
 pub mod hamming;
@@ -23,4 +26,5 @@ pub use chain::{
     estimate_matched, extract_undistorted, ChainCounts, ChainOutcome, ChainResult, ChainTiming,
     FrameInput, FrameMeta, Located, MatchOutcome, MatchedSet, PastMatch, VisionChain,
 };
+pub use frame_tracking::{FrameTracker, Motion, Observed, TrackReport};
 pub use config::{FundamentalMethod, MatchingConfig, OrbScore, UsacLocalOptimisation, UsacScore};

@@ -51,16 +51,21 @@ impl KeyframeRing {
     /// Admits `frame` if the ring is empty or the UAV moved at least T_re since the last
     /// admitted frame; evicts the oldest when full. Returns whether it was admitted.
     pub fn offer(&mut self, frame: Keyframe) -> bool {
-        if let Some(last) = self.frames.back() {
-            if distance(&last.baseline_position, &frame.baseline_position) < self.spacing_m {
-                return false;
-            }
+        if !self.would_admit(&frame.baseline_position) {
+            return false;
         }
         if self.frames.len() == self.capacity {
             self.frames.pop_front();
         }
         self.frames.push_back(frame);
         true
+    }
+
+    /// Whether [`KeyframeRing::offer`] would admit a frame measured from `position`.
+    pub fn would_admit(&self, position: &Point3<f64>) -> bool {
+        self.frames
+            .back()
+            .is_none_or(|last| distance(&last.baseline_position, position) >= self.spacing_m)
     }
 
     /// Up to `count` past keyframes for a geolocation at `current`, newest first, each at

@@ -194,16 +194,16 @@ pub fn run_scene(
                 })
                 .collect();
             let started = process_cpu_ns();
-            let features = [
-                lane.chain.extract(&inputs[0])?,
-                lane.chain.extract(&inputs[1])?,
+            let mut observed = [
+                lane.chain.observe(Uav::Left, &inputs[0])?.0,
+                lane.chain.observe(Uav::Right, &inputs[1])?.0,
             ];
             let metas = [inputs[0].meta(), inputs[1].meta()];
             let mut timing = matching::ChainTiming::default();
             let mut rejections = Vec::new();
             let outcome = lane.chain.match_current(
                 [&metas[0], &metas[1]],
-                &features,
+                &mut observed,
                 &mut timing,
                 &mut rejections,
             )?;
@@ -237,7 +237,7 @@ pub fn run_scene(
                 }
                 _ => None,
             };
-            lane.chain.admit([&metas[0], &metas[1]], &features);
+            lane.chain.admit([&metas[0], &metas[1]], &mut observed)?;
             let counts = lane.chain.take_counts();
             if !counted {
                 continue;
