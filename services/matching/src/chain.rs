@@ -280,6 +280,10 @@ pub struct VisionChain {
     /// tracking epoch that frame began and the reason: not retried before the side's
     /// next ORB frame.
     failed: HashMap<PriorKey, (u64, MatchReject)>,
+    /// Per keyframe (UAV, seq): the ground homographies from it to the past images it
+    /// was matched with as a current frame, so that a current frame with a prior for
+    /// one of those can be guided to it without brute force.
+    links: HashMap<(usize, u64), Vec<((usize, u64), Matrix3<f64>)>>,
 }
 
 /// One past image to match, with what guides each current side.
@@ -352,6 +356,7 @@ impl VisionChain {
             smoothed: [None, None],
             priors: HashMap::new(),
             failed: HashMap::new(),
+            links: HashMap::new(),
             config,
             estimator,
         })
@@ -399,15 +404,13 @@ impl VisionChain {
         t_s: f64,
         position: nalgebra::Point3<f64>,
     ) -> bool {
-        let Some((epoch, _)) = self.trackers[uav.index()].next_step(seq) else {
-            return true;
-        };
         let here = self.predicted_baseline(uav, t_s, position);
         if self.rings[uav.index()].would_admit(&here) {
             return true;
         }
         let wanted = self.config.images_per_uav - 1;
-        [Uav::Left, Uav::Right].into_iter().any(|ring_uav| {
+        let mut selections = Vec::with_capacity(2);
+        for ring_uav in [Uav::Left, Uav::Right] {
             let at = if ring_uav == uav {
                 here
             } else {
@@ -416,16 +419,24 @@ impl VisionChain {
                     None => return false,
                 }
             };
-            self.rings[ring_uav.index()]
-                .select(&at, seq, wanted)
-                .iter()
-                .any(|kf| {
-                    let key = (uav.index(), ring_uav.index(), kf.seq);
-                    let anchor = self.priors.get(&key).and_then(|p| p.anchor.as_ref());
-                    let known = anchor.is_some_and(|a| a.epoch == epoch)
-                        || self.failed.get(&key).is_some_and(|(e, _)| *e == epoch);
-                    !known
-                })
+            let selected = self.rings[ring_uav.index()].select(&at, seq, wanted);
+            if selected.len() < wanted {
+                // Warming up: no matching, so no features unless admitted.
+                return false;
+            }
+            selections.push((ring_uav, selected));
+        }
+        let Some((epoch, _)) = self.trackers[uav.index()].next_step(seq) else {
+            return true;
+        };
+        selections.iter().any(|(ring_uav, selected)| {
+            selected.iter().any(|kf| {
+                let key = (uav.index(), ring_uav.index(), kf.seq);
+                let anchor = self.priors.get(&key).and_then(|p| p.anchor.as_ref());
+                let known = anchor.is_some_and(|a| a.epoch == epoch)
+                    || self.failed.get(&key).is_some_and(|(e, _)| *e == epoch);
+                !known
+            })
         })
     }
 
@@ -528,6 +539,16 @@ impl VisionChain {
             let Some(features) = observed[uav.index()].features.clone() else {
                 continue;
             };
+            // The ground homographies fitted on this very frame: its links.
+            let links: Vec<((usize, u64), Matrix3<f64>)> = self
+                .priors
+                .iter()
+                .filter(|((side, _, _), p)| *side == uav.index() && p.t_s == frame.t_s)
+                .map(|((_, kf_uav, kf_seq), p)| ((*kf_uav, *kf_seq), p.homography))
+                .collect();
+            if !links.is_empty() {
+                self.links.insert((uav.index(), frame.seq), links);
+            }
             admitted[uav.index()] = self.rings[uav.index()].offer(Keyframe {
                 seq: frame.seq,
                 t_s: frame.t_s,
@@ -736,6 +757,8 @@ impl VisionChain {
             .retain(|&(_, uav, seq), _| rings[uav].iter().any(|kf| kf.seq == seq));
         self.failed
             .retain(|&(_, uav, seq), _| rings[uav].iter().any(|kf| kf.seq == seq));
+        self.links
+            .retain(|&(uav, seq), _| rings[uav].iter().any(|kf| kf.seq == seq));
 
         Ok(MatchOutcome::Matched(Box::new(MatchedSet {
             current: current_obs,
@@ -761,13 +784,14 @@ impl VisionChain {
             (Some((epoch, reason)), Some(m)) if *epoch == m.epoch => Some(*reason),
             _ => None,
         };
+        let config = &self.config;
         let Some(prior) = self.priors.get(&(side, uav.index(), seq)) else {
             return Guide {
                 failed,
+                prior: self.linked_prior(side, uav, seq, frame),
                 ..Guide::default()
             };
         };
-        let config = &self.config;
         let age = frame.t_s - prior.t_s;
         let fresh = (0.0..=config.guided_max_age_s).contains(&age);
         let tracked = match (&prior.anchor, motion) {
@@ -779,6 +803,29 @@ impl VisionChain {
             tracked,
             failed,
         }
+    }
+
+    /// A guide to keyframe `seq` of `uav` that this side has never matched: through
+    /// a past image both were matched with, `H_cur→kf = H_kf→j⁻¹ · H_cur→j` (all ground
+    /// homographies). Without it a newly selected keyframe is matched by brute force,
+    /// the slowest step of the chain (docs/pipeline.md).
+    fn linked_prior(
+        &self,
+        side: usize,
+        uav: Uav,
+        seq: u64,
+        frame: &FrameMeta,
+    ) -> Option<Matrix3<f64>> {
+        let config = &self.config;
+        if config.guided_radius_px <= 0.0 {
+            return None;
+        }
+        self.links.get(&(uav.index(), seq))?.iter().find_map(|((j_uav, j_seq), h_link)| {
+            let p = self.priors.get(&(side, *j_uav, *j_seq))?;
+            let fresh = (0.0..=config.guided_max_age_s).contains(&(frame.t_s - p.t_s));
+            let h = h_link.try_inverse()? * p.homography;
+            (fresh && h.iter().all(|v| v.is_finite())).then_some(h)
+        })
     }
 
     /// Hands side `side`'s ground inliers (each past image's, current ↔ past) to its

@@ -205,17 +205,17 @@ impl FrameTracker {
             return Ok((observed, counts, report));
         }
         let grey = grey_of(frame.image)?;
+        let had_points = self
+            .previous
+            .as_ref()
+            .is_some_and(|p| p.ids.len() >= self.min_inliers);
         let followed = match self.previous.as_ref() {
-            Some(p)
-                if frame.seq > p.seq
-                    && frame.t_s - p.t_s <= MAX_GAP_S
-                    && p.ids.len() >= self.min_inliers =>
-            {
-                report.lost = true;
+            Some(p) if had_points && frame.seq > p.seq && frame.t_s - p.t_s <= MAX_GAP_S => {
                 self.follow(p, &grey, frame)?
             }
             _ => None,
         };
+        report.lost = had_points && followed.is_none();
         let (points, ids, motion) = match followed {
             Some((points, ids, tracked)) => {
                 report = TrackReport {
@@ -237,7 +237,9 @@ impl FrameTracker {
                 (cv::Vector::new(), Vec::new(), None)
             }
         };
-        let run_orb = want_features || motion.is_none() || self.refresh_due(frame.seq);
+        // A frame nobody asked features of and that cannot be followed keeps its pixels
+        // instead: ORB runs late if its pair turns out to need it.
+        let run_orb = want_features || (motion.is_some() && self.refresh_due(frame.seq));
         let mut counts = ChainCounts::default();
         let mut features = None;
         if run_orb {
@@ -468,7 +470,7 @@ mod tests {
         let config = MatchingConfig::default();
         let mut tracker = FrameTracker::new(&config).expect("tracker");
         let f1 = frame(1, 0.0, &first);
-        let (o1, _, r1) = tracker.observe(&f1, false).expect("first");
+        let (o1, _, r1) = tracker.observe(&f1, true).expect("first");
         assert!(r1.orb && !r1.tracked, "{r1:?}");
         let seeds = seed_from(&mut tracker, &f1, &o1);
         let (_, _, r2) = tracker.observe(&frame(2, 0.033, &second), false).expect("second");
@@ -511,19 +513,21 @@ mod tests {
         let mut orb = Vec::new();
         for i in 0..7 {
             let f = frame(i, i as f64 / 30.0, &image);
-            let (o, _, r) = tracker.observe(&f, false).expect("observe");
+            let (o, _, r) = tracker.observe(&f, i == 0).expect("observe");
             if r.orb {
                 seed_from(&mut tracker, &f, &o);
             }
             orb.push(r.orb);
         }
         assert_eq!(orb, [true, false, false, true, false, false, true]);
-        // A second later: not followed across the gap.
+        // A second later: not followed across the gap, and (not asked for) no ORB:
+        // the frame keeps its pixels for a late ORB.
         let (o, _, r) = tracker.observe(&frame(40, 1.5, &image), false).expect("late");
-        assert!(r.orb && !r.tracked && o.motion.is_none(), "{r:?}");
-        // Not seeded (say, no detection in that pair): nothing to follow, ORB again.
+        assert!(r.lost && !r.orb && !r.tracked && o.motion.is_none(), "{r:?}");
+        assert!(o.features.is_none() && o.grey.is_some());
+        // Not seeded (say, no detection in that pair): nothing to follow.
         let (_, _, r) = tracker.observe(&frame(41, 1.533, &image), false).expect("next");
-        assert!(r.orb && !r.tracked, "{r:?}");
+        assert!(!r.orb && !r.tracked && !r.lost, "{r:?}");
         // Seeding a frame the tracker has moved past does nothing.
         let f = frame(40, 1.5, &image);
         assert!(tracker.seed(40, &[cv::Point2f::new(1.0, 1.0)], &f.intrinsics, &f.distortion).is_none());
@@ -535,7 +539,7 @@ mod tests {
         let config = MatchingConfig::default();
         let mut tracker = FrameTracker::new(&config).expect("tracker");
         let f1 = frame(1, 0.0, &image);
-        let (o1, _, _) = tracker.observe(&f1, false).expect("first");
+        let (o1, _, _) = tracker.observe(&f1, true).expect("first");
         seed_from(&mut tracker, &f1, &o1);
         let f2 = frame(2, 0.033, &image);
         let (mut o, _, r) = tracker.observe(&f2, false).expect("second");
