@@ -114,6 +114,36 @@ pub struct SimSource {
     config: SimConfig,
     sim: Simulator,
     steps: u64,
+    /// Where the renderer runs: threads of lower priority (see [`RENDER_NICE`]).
+    render_pool: Option<rayon::ThreadPool>,
+}
+
+/// The live simulator stands in for a camera, and a camera costs the ground station
+/// nothing: its renderer (~40 ms of CPU a pair, more than the pipeline's own work)
+/// runs at this nice value, so that detection, matching and geolocation take a core
+/// from it whenever they need one (issue #15). It renders a pair ahead, so it has the
+/// CPU the pipeline leaves; a pair it renders late is counted (`pairs_behind`).
+pub const RENDER_NICE: i32 = 10;
+
+/// A pool of two threads at [`RENDER_NICE`] (nice is per thread on Linux and threads
+/// inherit it). `None` when the pool cannot be built: the renderer then runs at the
+/// service's own priority.
+fn render_pool() -> Option<rayon::ThreadPool> {
+    rayon::ThreadPoolBuilder::new()
+        .num_threads(2)
+        .thread_name(|i| format!("render-{i}"))
+        .start_handler(|_| {
+            // SAFETY: setpriority on the calling thread's id (gettid) only changes
+            // this thread's nice value; a failure (no permission) leaves it as it was.
+            unsafe {
+                let tid = libc::syscall(libc::SYS_gettid) as libc::id_t;
+                if libc::setpriority(libc::PRIO_PROCESS, tid, RENDER_NICE) != 0 {
+                    tracing::debug!("the renderer keeps the service's priority");
+                }
+            }
+        })
+        .build()
+        .ok()
 }
 
 impl SimSource {
@@ -123,6 +153,7 @@ impl SimSource {
             config,
             sim,
             steps: 0,
+            render_pool: render_pool(),
         })
     }
 }
@@ -176,7 +207,11 @@ impl FrameSource for SimSource {
     ) -> Option<Result<PairInfo, SourceError>> {
         let step = self.sim.step()?;
         self.steps += 1;
-        self.sim.render_pair(&step, left, right, stride);
+        let sim = &mut self.sim;
+        match &self.render_pool {
+            Some(pool) => pool.install(|| sim.render_pair(&step, left, right, stride)),
+            None => sim.render_pair(&step, left, right, stride),
+        }
         let truth = step.frames.each_ref().map(|f| TruthRow {
             uav: f.uav,
             frame: f.seq,

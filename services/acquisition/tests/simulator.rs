@@ -1,7 +1,7 @@
 //! The simulator: rendered target against truth, ORB epipolar geometry against the true
 //! poses, determinism, the noise model, and a simulated recording through the reader.
 
-use acquisition::recording::Recording;
+use acquisition::recording::{ImageEncoding, Recording};
 use acquisition::sim::render::{CameraView, Renderer, Surface, VEHICLE_TOP_BGR};
 use acquisition::sim::{record, Presets, SimConfig, Simulator};
 use nalgebra::Vector3;
@@ -210,10 +210,37 @@ fn orb_matches_agree_with_the_true_epipolar_geometry() {
 }
 
 fn write(config: SimConfig, dir: &TempDir) -> std::path::PathBuf {
+    write_as(config, dir, ImageEncoding::Png)
+}
+
+fn write_as(config: SimConfig, dir: &TempDir, encoding: ImageEncoding) -> std::path::PathBuf {
     let out = dir.path().join("rec");
     let mut sim = simulator(config);
-    record(&mut sim, "test", &out, |_, _| {}).unwrap();
+    record(&mut sim, "test", &out, encoding, |_, _| {}).unwrap();
     out
+}
+
+#[test]
+fn a_jpeg_recording_reads_back_close_to_its_png_twin() {
+    let mut config = preset("default");
+    config.duration_s = 0.2;
+    let (d1, d2) = (TempDir::new().unwrap(), TempDir::new().unwrap());
+    let png = Recording::open(write(config.clone(), &d1)).unwrap();
+    let jpeg = write_as(config, &d2, ImageEncoding::Jpeg { quality: 95 });
+    assert!(jpeg.join("left/000002.jpg").exists());
+    assert!(!jpeg.join("left/000002.png").exists());
+    let jpeg = Recording::open(&jpeg).unwrap();
+    assert_eq!(jpeg.telemetry.len(), png.telemetry.len());
+    let (a, b) = (png.read_image(2).unwrap(), jpeg.read_image(2).unwrap());
+    assert_eq!((b.cols(), b.rows(), b.channels()), (640, 480, 3));
+    let (a, b) = (a.data_bytes().unwrap(), b.data_bytes().unwrap());
+    let mean_abs = a
+        .iter()
+        .zip(b)
+        .map(|(x, y)| (*x as f64 - *y as f64).abs())
+        .sum::<f64>()
+        / a.len() as f64;
+    assert!(mean_abs < 3.0, "JPEG 95 differs by {mean_abs} grey levels on average");
 }
 
 #[test]

@@ -2,6 +2,7 @@
 //! flight (videos + MAVLink logs, `--flight-out`).
 
 use acquisition::flight::video::VideoCodec;
+use acquisition::recording::ImageEncoding;
 use acquisition::sim::{record, record_flight, ScenarioArgs, Simulator};
 use anyhow::{Context, Result};
 use clap::Args;
@@ -26,6 +27,10 @@ pub struct SimulateArgs {
     /// `lossless` (FFV1 in MKV, to measure the flight path without compression).
     #[arg(long, default_value = "h264", value_parser = ["h264", "lossless"])]
     flight_video: String,
+    /// Write the recording's images as JPEG of this quality (1–100) instead of PNG:
+    /// several times faster to decode on replay (docs/pipeline.md measures both).
+    #[arg(long, value_parser = clap::value_parser!(u8).range(1..=100), conflicts_with = "flight_out")]
+    jpeg_quality: Option<u8>,
     /// List the presets and exit.
     #[arg(long)]
     list: bool,
@@ -89,7 +94,11 @@ pub fn run(args: &SimulateArgs) -> Result<()> {
             (dir.join("flight.toml"), summary)
         }
         (Some(out), None) => {
-            let summary = record(&mut sim, &args.scenario.preset, out, progress)
+            let encoding = match args.jpeg_quality {
+                Some(quality) => ImageEncoding::Jpeg { quality },
+                None => ImageEncoding::Png,
+            };
+            let summary = record(&mut sim, &args.scenario.preset, out, encoding, progress)
                 .with_context(|| format!("writing recording {}", out.display()))?;
             (out.clone(), summary)
         }

@@ -351,7 +351,10 @@ impl VisionChain {
         Ok(Self {
             counts: ChainCounts::default(),
             steps: Vec::new(),
-            trackers: [FrameTracker::new(&config)?, FrameTracker::new(&config)?],
+            trackers: [
+                FrameTracker::new(&config, Uav::Left)?,
+                FrameTracker::new(&config, Uav::Right)?,
+            ],
             rings: [ring(), ring()],
             smoothed: [None, None],
             priors: HashMap::new(),

@@ -191,7 +191,7 @@ impl Default for MatchingConfig {
             border_px: 2.0,
             track_between_orb: true,
             track_refresh_frames: 6,
-            track_points_per_image: 80,
+            track_points_per_image: 150,
             track_min_inliers: 30,
             track_ransac_px: 1.0,
         }

@@ -28,8 +28,8 @@
 //!   gap of more than 0.5 s, or a frame of another size) loses the track: the frame
 //!   runs ORB and a new *epoch* begins, and anchors never cross epochs.
 //! - **Refresh**: ORB and Hamming matching run at least every `track_refresh_frames`
-//!   frames of a UAV (on the pairs whose sequence number crosses a multiple of it, so
-//!   both UAVs refresh on the same pair), on every frame its keyframe ring may admit,
+//!   frames of a UAV (the two UAVs half a period apart), on every frame its keyframe
+//!   ring may admit,
 //!   and when a selected past image has neither an anchor nor a failure recorded
 //!   since the last refresh (the chain decides, [`crate::VisionChain::wants_features`]).
 //!   A past image whose fit failed on the last ORB frame is not retried before the
@@ -41,7 +41,7 @@ use crate::epipolar::usac_params;
 use crate::features::{Features, OrbExtractor};
 use opencv::core as cv;
 use opencv::prelude::*;
-use shared_types::conventions::Intrinsics;
+use shared_types::conventions::{Intrinsics, Uav};
 use shared_types::lens::Distortion;
 use std::sync::Arc;
 
@@ -129,14 +129,19 @@ pub struct FrameTracker {
     step: u64,
     /// The sequence number of the last frame that ran ORB.
     last_orb_seq: Option<u64>,
+    /// Shifts this UAV's refreshes against the other's (see `refresh_due`).
+    phase: u64,
 }
 
 impl FrameTracker {
-    pub fn new(config: &MatchingConfig) -> Result<Self, ChainError> {
+    /// The tracker of `uav`'s camera.
+    pub fn new(config: &MatchingConfig, uav: Uav) -> Result<Self, ChainError> {
+        let refresh_frames = config.track_refresh_frames.max(1) as u64;
         Ok(Self {
+            phase: uav.index() as u64 * refresh_frames / 2,
             orb: OrbExtractor::new(config)?,
             enabled: config.track_between_orb,
-            refresh_frames: config.track_refresh_frames.max(1) as u64,
+            refresh_frames,
             min_inliers: config.track_min_inliers,
             ransac_px: config.track_ransac_px,
             config: config.clone(),
@@ -155,12 +160,16 @@ impl FrameTracker {
         ok.then_some((self.epoch, self.step + 1))
     }
 
-    /// A refresh is due when `seq` crosses a multiple of `track_refresh_frames` since
-    /// the last ORB frame: at most that many frames apart, and both UAVs' refreshes
-    /// fall on the same pair (whose matching waits for the slower side anyway).
+    /// A refresh is due when `seq` (shifted by this UAV's phase) crosses a multiple of
+    /// `track_refresh_frames` since the last ORB frame: at most that many frames
+    /// apart. The right UAV's phase is half a period: the two UAVs refresh on
+    /// different pairs, so a refresh pair runs one ORB (on one core) beside one
+    /// tracked frame rather than two ORBs that take both cores from decoding and
+    /// detection. Measured (pipeline bench, same hour): see docs/pipeline.md.
     fn refresh_due(&self, seq: u64) -> bool {
+        let k = self.refresh_frames;
         self.last_orb_seq
-            .is_none_or(|last| seq / self.refresh_frames != last / self.refresh_frames)
+            .is_none_or(|last| (seq + self.phase) / k != (last + self.phase) / k)
     }
 
     /// ORB on a frame, its keypoints undistorted (no tracking).
@@ -468,7 +477,7 @@ mod tests {
         let second = warp(&first, &step);
         let third = warp(&second, &step);
         let config = MatchingConfig::default();
-        let mut tracker = FrameTracker::new(&config).expect("tracker");
+        let mut tracker = FrameTracker::new(&config, Uav::Left).expect("tracker");
         let f1 = frame(1, 0.0, &first);
         let (o1, _, r1) = tracker.observe(&f1, true).expect("first");
         assert!(r1.orb && !r1.tracked, "{r1:?}");
@@ -509,7 +518,7 @@ mod tests {
             track_refresh_frames: 3,
             ..MatchingConfig::default()
         };
-        let mut tracker = FrameTracker::new(&config).expect("tracker");
+        let mut tracker = FrameTracker::new(&config, Uav::Left).expect("tracker");
         let mut orb = Vec::new();
         for i in 0..7 {
             let f = frame(i, i as f64 / 30.0, &image);
@@ -537,7 +546,7 @@ mod tests {
     fn a_tracked_frame_can_still_get_its_features_late() {
         let image = texture();
         let config = MatchingConfig::default();
-        let mut tracker = FrameTracker::new(&config).expect("tracker");
+        let mut tracker = FrameTracker::new(&config, Uav::Left).expect("tracker");
         let f1 = frame(1, 0.0, &image);
         let (o1, _, _) = tracker.observe(&f1, true).expect("first");
         seed_from(&mut tracker, &f1, &o1);
@@ -560,7 +569,7 @@ mod tests {
             track_between_orb: false,
             ..MatchingConfig::default()
         };
-        let mut tracker = FrameTracker::new(&config).expect("tracker");
+        let mut tracker = FrameTracker::new(&config, Uav::Left).expect("tracker");
         for i in 0..3 {
             let (o, _, r) = tracker
                 .observe(&frame(i, i as f64 / 30.0, &image), false)

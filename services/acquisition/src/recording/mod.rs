@@ -20,7 +20,7 @@ pub use rows::{
     TELEMETRY_HEADER, TRUTH_HEADER,
 };
 pub use stream_log::StreamLog;
-pub use writer::{RecordingWriter, TruthSample};
+pub use writer::{ImageEncoding, RecordingWriter, TruthSample};
 
 pub const META_FILE: &str = "recording.toml";
 pub const TELEMETRY_FILE: &str = "telemetry.csv";

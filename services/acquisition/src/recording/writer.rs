@@ -1,4 +1,5 @@
-//! Writing a recording: images as PNG (lossless), telemetry.csv and optionally truth.csv,
+//! Writing a recording: images as PNG (lossless, the default) or JPEG, telemetry.csv and
+//! optionally truth.csv,
 //! with floats in Rust's shortest round-trip form so the reader gets back exactly what
 //! was written.
 
@@ -21,6 +22,37 @@ pub struct TruthSample {
     pub target_px: Option<[f64; 2]>,
 }
 
+/// How a recording's images are encoded.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ImageEncoding {
+    /// Lossless (the default).
+    Png,
+    /// JPEG at this quality (1–100): several times faster to decode on replay
+    /// (docs/pipeline.md), at the cost of compression artefacts.
+    Jpeg { quality: u8 },
+}
+
+impl ImageEncoding {
+    fn extension(self) -> &'static str {
+        match self {
+            ImageEncoding::Png => "png",
+            ImageEncoding::Jpeg { .. } => "jpg",
+        }
+    }
+
+    fn params(self) -> cv::Vector<i32> {
+        match self {
+            ImageEncoding::Png => {
+                cv::Vector::from_slice(&[opencv::imgcodecs::IMWRITE_PNG_COMPRESSION, 1])
+            }
+            ImageEncoding::Jpeg { quality } => cv::Vector::from_slice(&[
+                opencv::imgcodecs::IMWRITE_JPEG_QUALITY,
+                quality.clamp(1, 100) as i32,
+            ]),
+        }
+    }
+}
+
 pub struct RecordingWriter {
     root: PathBuf,
     meta: RecordingMeta,
@@ -28,7 +60,8 @@ pub struct RecordingWriter {
     truth: Option<csv::Writer<File>>,
     next_frame: [u64; 2],
     last_t: [Option<f64>; 2],
-    png_params: cv::Vector<i32>,
+    encoding: ImageEncoding,
+    params: cv::Vector<i32>,
 }
 
 fn write_err(path: &Path, message: impl std::fmt::Display) -> RecordingError {
@@ -77,8 +110,16 @@ impl RecordingWriter {
             truth,
             next_frame: [0; 2],
             last_t: [None; 2],
-            png_params: cv::Vector::from_slice(&[opencv::imgcodecs::IMWRITE_PNG_COMPRESSION, 1]),
+            encoding: ImageEncoding::Png,
+            params: ImageEncoding::Png.params(),
         })
+    }
+
+    /// Encodes the images from now on as `encoding` (PNG until told otherwise).
+    pub fn with_encoding(mut self, encoding: ImageEncoding) -> Self {
+        self.encoding = encoding;
+        self.params = encoding.params();
+        self
     }
 
     pub fn root(&self) -> &Path {
@@ -98,7 +139,7 @@ impl RecordingWriter {
         self.write_encoded_frame(uav, t_s, measured, &png, truth)
     }
 
-    /// Checks `image` against `uav`'s camera and encodes it as PNG. Takes `&self`, so
+    /// Checks `image` against `uav`'s camera and encodes it. Takes `&self`, so
     /// both UAVs' frames can be encoded at once on two threads.
     pub fn encode(&self, uav: Uav, image: &cv::Mat) -> Result<Vec<u8>, RecordingError> {
         let camera = self.meta.uav(uav).camera;
@@ -119,10 +160,11 @@ impl RecordingWriter {
                 ),
             ));
         }
-        let mut png = cv::Vector::<u8>::new();
-        opencv::imgcodecs::imencode(".png", image, &mut png, &self.png_params)
+        let mut bytes = cv::Vector::<u8>::new();
+        let extension = format!(".{}", self.encoding.extension());
+        opencv::imgcodecs::imencode(&extension, image, &mut bytes, &self.params)
             .map_err(|e| write_err(&path, e.message))?;
-        Ok(png.to_vec())
+        Ok(bytes.to_vec())
     }
 
     /// [`RecordingWriter::write_frame`] for an image already encoded by
@@ -136,7 +178,8 @@ impl RecordingWriter {
         truth: Option<&TruthSample>,
     ) -> Result<TelemetryRow, RecordingError> {
         let frame = self.next_frame[uav.index()];
-        let file = format!("{}/{frame:06}.png", self.meta.uav(uav).frames);
+        let extension = self.encoding.extension();
+        let file = format!("{}/{frame:06}.{extension}", self.meta.uav(uav).frames);
         let path = self.root.join(&file);
         if !t_s.is_finite() || self.last_t[uav.index()].is_some_and(|last| t_s <= last) {
             return Err(write_err(

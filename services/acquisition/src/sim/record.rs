@@ -5,7 +5,9 @@ use super::simulator::{SimStep, Simulator};
 use super::SimError;
 use crate::flight::video::VideoCodec;
 use crate::flight::writer::FlightWriter;
-use crate::recording::{CameraMeta, RecordingMeta, RecordingWriter, TruthRow, TruthSample};
+use crate::recording::{
+    CameraMeta, ImageEncoding, RecordingMeta, RecordingWriter, TruthRow, TruthSample,
+};
 use opencv::core as cv;
 use opencv::prelude::*;
 use shared_types::conventions::Uav;
@@ -92,17 +94,19 @@ fn camera_of(sim: &Simulator) -> CameraMeta {
     }
 }
 
-/// Renders every step of `sim` into a new recording at `out`; `progress(done, total)`
+/// Renders every step of `sim` into a new recording at `out`, its images encoded as
+/// `encoding`; `progress(done, total)`
 /// is called after each stereo pair.
 pub fn record(
     sim: &mut Simulator,
     name: &str,
     out: &Path,
+    encoding: ImageEncoding,
     progress: impl FnMut(u64, u64),
 ) -> Result<RecordSummary, SimError> {
     let config = sim.config().clone();
     let meta = RecordingMeta::new(name, config.frame_rate_hz, camera_of(sim), config.origin);
-    let mut writer = RecordingWriter::create(out, &meta, true)?;
+    let mut writer = RecordingWriter::create(out, &meta, true)?.with_encoding(encoding);
     let summary = render_into(sim, &mut writer, progress)?;
     writer.finish()?;
     Ok(summary)
