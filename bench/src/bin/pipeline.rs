@@ -4,7 +4,9 @@
 //!
 //! 1. the README's live simulator (`default` preset, 2 × 30 FPS);
 //! 2. a recording of the same scenario replayed at its own rate (realtime);
-//! 3. the same recording with `--rate max`.
+//! 3. the same recording with `--rate max`;
+//! 4. the same scenario recorded as JPEG (quality 95) replayed at its own rate: the
+//!    decode cost PNG and JPEG recordings put on the end-to-end clock.
 //!
 //! Each figure is printed beside the committed one (`bench/baselines/pipeline.json`)
 //! as a ratio: the latency regression guard. `--save-baseline` makes this run the
@@ -156,6 +158,24 @@ fn main() -> Result<()> {
         "--out",
         &s("max"),
     ])?;
+    run(&[
+        "simulate",
+        "--preset",
+        "default",
+        "--duration-s",
+        &d,
+        "--jpeg-quality",
+        "95",
+        "--out",
+        &s("rec_jpeg"),
+    ])?;
+    run(&[
+        "run",
+        "--source",
+        &s("rec_jpeg"),
+        "--out",
+        &s("replay_jpeg"),
+    ])?;
 
     let mut now: Vec<Figure> = Vec::new();
     now.extend(figures(
@@ -172,6 +192,11 @@ fn main() -> Result<()> {
         "replay, --rate max",
         &report(&scratch.join("max"))?,
         true,
+    ));
+    now.extend(figures(
+        "replay JPEG 95, realtime",
+        &report(&scratch.join("replay_jpeg"))?,
+        false,
     ));
 
     let before: BTreeMap<String, f64> = std::fs::read_to_string(BASELINE)

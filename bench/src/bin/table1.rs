@@ -185,7 +185,10 @@ fn main() -> Result<()> {
                 for model in located.past.iter().flat_map(|p| p.models).flatten() {
                     *outcomes.entry(format!("F model: {model:?}")).or_default() += 1;
                 }
-                let sides = located.past.iter().flat_map(|p| p.guided.into_iter().zip(p.chained));
+                let sides = located
+                    .past
+                    .iter()
+                    .flat_map(|p| p.guided.into_iter().zip(p.chained));
                 for (guided, chained) in sides {
                     let how = match (chained, guided) {
                         (true, _) => "by tracking",

@@ -240,7 +240,10 @@ fn a_jpeg_recording_reads_back_close_to_its_png_twin() {
         .map(|(x, y)| (*x as f64 - *y as f64).abs())
         .sum::<f64>()
         / a.len() as f64;
-    assert!(mean_abs < 3.0, "JPEG 95 differs by {mean_abs} grey levels on average");
+    assert!(
+        mean_abs < 3.0,
+        "JPEG 95 differs by {mean_abs} grey levels on average"
+    );
 }
 
 #[test]

@@ -185,7 +185,7 @@ impl ColourBlobDetector {
         let (cols, rows) = (self.mask.cols(), self.mask.rows());
         for label in 1..n {
             if window {
-                let stat = |k| self.stats.at_2d::<i32>(label, k).map(|v| *v);
+                let stat = |k| self.stats.at_2d::<i32>(label, k).copied();
                 let (x, y) = (
                     stat(opencv::imgproc::CC_STAT_LEFT)?,
                     stat(opencv::imgproc::CC_STAT_TOP)?,
@@ -270,7 +270,11 @@ impl ColourBlobDetector {
             if let Some(rect) = window(centre, 2.0 * radius, frame.cols(), frame.rows()) {
                 self.window_looks += 1;
                 let part = cv::Mat::roi(frame, rect)?;
-                opencv::imgproc::cvt_color_def(&part, &mut self.hsv, opencv::imgproc::COLOR_BGR2HSV)?;
+                opencv::imgproc::cvt_color_def(
+                    &part,
+                    &mut self.hsv,
+                    opencv::imgproc::COLOR_BGR2HSV,
+                )?;
                 let local = [centre[0] - rect.x as f64, centre[1] - rect.y as f64];
                 best = self.pick_blob(value_min, Some((local, radius)), true)?;
                 if best.is_some() {
@@ -326,7 +330,10 @@ fn window(centre: [f64; 2], half: f64, cols: i32, rows: i32) -> Option<cv::Rect>
     }
     let clip = |v: f64, max: i32| v.clamp(0.0, max as f64) as i32;
     let (x0, y0) = (clip(centre[0] - half, cols), clip(centre[1] - half, rows));
-    let (x1, y1) = (clip(centre[0] + half + 1.0, cols), clip(centre[1] + half + 1.0, rows));
+    let (x1, y1) = (
+        clip(centre[0] + half + 1.0, cols),
+        clip(centre[1] + half + 1.0, rows),
+    );
     let (w, h) = (x1 - x0, y1 - y0);
     let small = w > 0 && h > 0 && (w as i64 * h as i64) * 2 < cols as i64 * rows as i64;
     small.then(|| cv::Rect::new(x0, y0, w, h))
@@ -523,7 +530,10 @@ pub(crate) mod tests {
                     cv::Scalar::new(36.0, 28.0, 214.0, 0.0),
                 );
                 if car == 0 {
-                    first = [x as f64 + (next(60) - 30) as f64, y as f64 + (next(60) - 30) as f64];
+                    first = [
+                        x as f64 + (next(60) - 30) as f64,
+                        y as f64 + (next(60) - 30) as f64,
+                    ];
                 }
             }
             let hint = Some(TrackHint {
@@ -539,7 +549,10 @@ pub(crate) mod tests {
         let (looks, misses) = windowed.window_counts();
         // A hint off the frame's edge leaves no window to look in.
         assert!(looks > 150, "{looks} windows");
-        assert!(found > 100 && misses < looks / 2, "{found} found, {looks} looks, {misses} misses");
+        assert!(
+            found > 100 && misses < looks / 2,
+            "{found} found, {looks} looks, {misses} misses"
+        );
         assert_eq!(whole.window_counts(), (0, 0));
     }
 }

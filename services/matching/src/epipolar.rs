@@ -127,7 +127,14 @@ pub fn estimate_fundamental(
     up: &Vector3<f64>,
     config: &MatchingConfig,
 ) -> Result<PairGeometry, MatchReject> {
-    estimate_fundamental_masked(current, past, intrinsics, up, config, &mut cv::Mat::default())
+    estimate_fundamental_masked(
+        current,
+        past,
+        intrinsics,
+        up,
+        config,
+        &mut cv::Mat::default(),
+    )
 }
 
 /// [`estimate_fundamental`], with `mask` marking the inliers of the model used (the

@@ -400,8 +400,9 @@ mod tests {
 
     /// A textured grey frame: seeded noise, blurred to corners KLT and ORB can hold.
     fn texture() -> cv::Mat {
-        let mut noise = cv::Mat::new_rows_cols_with_default(H, W, cv::CV_8UC1, cv::Scalar::all(0.0))
-            .expect("mat");
+        let mut noise =
+            cv::Mat::new_rows_cols_with_default(H, W, cv::CV_8UC1, cv::Scalar::all(0.0))
+                .expect("mat");
         cv::set_rng_seed(7).expect("seed");
         cv::randu(&mut noise, &cv::Scalar::all(0.0), &cv::Scalar::all(255.0)).expect("randu");
         let mut blurred = cv::Mat::default();
@@ -473,7 +474,17 @@ mod tests {
         let first = texture();
         // A small turn and drift, as between frames 33 ms apart (and a bit more).
         let (a, t) = (0.6_f64.to_radians(), [3.2, -1.7]);
-        let step = Matrix3::new(a.cos(), -a.sin(), t[0], a.sin(), a.cos(), t[1], 0.0, 0.0, 1.0);
+        let step = Matrix3::new(
+            a.cos(),
+            -a.sin(),
+            t[0],
+            a.sin(),
+            a.cos(),
+            t[1],
+            0.0,
+            0.0,
+            1.0,
+        );
         let second = warp(&first, &step);
         let third = warp(&second, &step);
         let config = MatchingConfig::default();
@@ -482,9 +493,16 @@ mod tests {
         let (o1, _, r1) = tracker.observe(&f1, true).expect("first");
         assert!(r1.orb && !r1.tracked, "{r1:?}");
         let seeds = seed_from(&mut tracker, &f1, &o1);
-        let (_, _, r2) = tracker.observe(&frame(2, 0.033, &second), false).expect("second");
-        let (o3, _, r3) = tracker.observe(&frame(3, 0.066, &third), false).expect("third");
-        assert!(r2.tracked && !r2.orb && r3.tracked && !r3.orb, "{r2:?} {r3:?}");
+        let (_, _, r2) = tracker
+            .observe(&frame(2, 0.033, &second), false)
+            .expect("second");
+        let (o3, _, r3) = tracker
+            .observe(&frame(3, 0.066, &third), false)
+            .expect("third");
+        assert!(
+            r2.tracked && !r2.orb && r3.tracked && !r3.orb,
+            "{r2:?} {r3:?}"
+        );
         assert!(o3.features.is_none(), "a tracked frame runs no ORB");
         let motion = o3.motion.expect("motion");
         assert_eq!(motion.step, 2);
@@ -531,15 +549,29 @@ mod tests {
         assert_eq!(orb, [true, false, false, true, false, false, true]);
         // A second later: not followed across the gap, and (not asked for) no ORB:
         // the frame keeps its pixels for a late ORB.
-        let (o, _, r) = tracker.observe(&frame(40, 1.5, &image), false).expect("late");
-        assert!(r.lost && !r.orb && !r.tracked && o.motion.is_none(), "{r:?}");
+        let (o, _, r) = tracker
+            .observe(&frame(40, 1.5, &image), false)
+            .expect("late");
+        assert!(
+            r.lost && !r.orb && !r.tracked && o.motion.is_none(),
+            "{r:?}"
+        );
         assert!(o.features.is_none() && o.grey.is_some());
         // Not seeded (say, no detection in that pair): nothing to follow.
-        let (_, _, r) = tracker.observe(&frame(41, 1.533, &image), false).expect("next");
+        let (_, _, r) = tracker
+            .observe(&frame(41, 1.533, &image), false)
+            .expect("next");
         assert!(!r.orb && !r.tracked && !r.lost, "{r:?}");
         // Seeding a frame the tracker has moved past does nothing.
         let f = frame(40, 1.5, &image);
-        assert!(tracker.seed(40, &[cv::Point2f::new(1.0, 1.0)], &f.intrinsics, &f.distortion).is_none());
+        assert!(tracker
+            .seed(
+                40,
+                &[cv::Point2f::new(1.0, 1.0)],
+                &f.intrinsics,
+                &f.distortion
+            )
+            .is_none());
     }
 
     #[test]
@@ -553,7 +585,9 @@ mod tests {
         let f2 = frame(2, 0.033, &image);
         let (mut o, _, r) = tracker.observe(&f2, false).expect("second");
         assert!(!r.orb && o.features.is_none());
-        let counts = tracker.ensure_features(&mut o, &f2.meta()).expect("late ORB");
+        let counts = tracker
+            .ensure_features(&mut o, &f2.meta())
+            .expect("late ORB");
         assert_eq!(counts.late_orb, 1);
         let n = o.features.as_ref().map_or(0, |f| f.points.len());
         assert!(n > 500, "{n} features");

@@ -185,7 +185,14 @@ impl Intake {
                 Ok(Some((header, observed, counts, report))) => {
                     self.chain.add_counts(&counts);
                     let name = if report.orb { "orb" } else { "track" };
-                    self.stats.count(if report.orb { "orb_frames" } else { "tracked_only_frames" }, 1);
+                    self.stats.count(
+                        if report.orb {
+                            "orb_frames"
+                        } else {
+                            "tracked_only_frames"
+                        },
+                        1,
+                    );
                     if report.lost {
                         self.stats.count("track_lost", 1);
                     }

@@ -26,5 +26,5 @@ pub use chain::{
     estimate_matched, extract_undistorted, ChainCounts, ChainOutcome, ChainResult, ChainTiming,
     FrameInput, FrameMeta, Located, MatchOutcome, MatchedSet, PastMatch, VisionChain,
 };
-pub use frame_tracking::{FrameTracker, Motion, Observed, TrackReport};
 pub use config::{FundamentalMethod, MatchingConfig, OrbScore, UsacLocalOptimisation, UsacScore};
+pub use frame_tracking::{FrameTracker, Motion, Observed, TrackReport};

@@ -4,24 +4,25 @@
 //! the altitude/regression iteration (Sections 2.1–2.2). The geolocation service, the
 //! tests and the evaluation harness all call [`VisionChain::process`].
 
+mod anchors;
+mod past;
+
+use anchors::{Guide, KeyframeId, Prior, PriorKey, SeedPairs};
+use past::{match_past, Job, PastResult};
+
 use crate::config::MatchingConfig;
-use crate::epipolar::{
-    estimate_fundamental, estimate_fundamental_masked, match_points, match_points_guided,
-    transfer_point, ImageBounds, MatchReject, PairGeometry,
-};
+use crate::epipolar::MatchReject;
 use crate::features::{Features, OrbExtractor};
-use crate::frame_tracking::{FrameTracker, Motion, Observed, TrackReport, TrackedPoints};
+use crate::frame_tracking::{FrameTracker, Observed, TrackReport};
 use crate::ground_plane::PlaneModel;
 use crate::ring::{Keyframe, KeyframeRing};
 use geolocation::{
     geolocate, geolocate_filtered, Estimate, EstimatorConfig, EstimatorError, FilteredEstimate,
     Observation,
 };
-use nalgebra::{Matrix3, Vector2, Vector3};
+use nalgebra::{Matrix3, Vector2};
 use opencv::core as cv;
-use opencv::prelude::*;
-use shared_types::clock::monotonic_ns;
-use shared_types::conventions::{camera_to_world, Intrinsics, Uav};
+use shared_types::conventions::{Intrinsics, Uav};
 use shared_types::lens::Distortion;
 use shared_types::messages::PoseSample;
 use std::collections::HashMap;
@@ -283,58 +284,7 @@ pub struct VisionChain {
     /// Per keyframe (UAV, seq): the ground homographies from it to the past images it
     /// was matched with as a current frame, so that a current frame with a prior for
     /// one of those can be guided to it without brute force.
-    links: HashMap<(usize, u64), Vec<((usize, u64), Matrix3<f64>)>>,
-}
-
-/// One past image to match, with what guides each current side.
-type Job<'a> = ((Uav, &'a Keyframe), [Guide; 2]);
-
-/// What one current side knows of a past image before matching it.
-#[derive(Debug, Clone, Default)]
-struct Guide {
-    /// The last fitted ground homography, young enough to guide matching.
-    prior: Option<Matrix3<f64>>,
-    /// Tracked correspondences with the past image (`frame_tracking.rs`): the
-    /// current frame's followed ground points joined with the anchor's.
-    tracked: Option<(cv::Vector<cv::Point2f>, cv::Vector<cv::Point2f>)>,
-    /// Why the fit failed on this side's last ORB frame, if it did and this frame is
-    /// tracked from it.
-    failed: Option<MatchReject>,
-}
-
-/// (current side, keyframe's UAV, keyframe seq).
-type PriorKey = (usize, usize, u64);
-
-/// A ground homography, current → keyframe pixels, found with the current frame of
-/// time `t_s`.
-#[derive(Debug, Clone)]
-struct Prior {
-    t_s: f64,
-    homography: Matrix3<f64>,
-    /// The ground inliers of the last fresh fit, as the tracker follows them.
-    anchor: Option<Anchor>,
-}
-
-/// A past image's ground inliers handed to the current side's tracker: the tracker's
-/// ids (valid in `epoch` only) with their points in the past image, by increasing id.
-#[derive(Debug, Clone)]
-struct Anchor {
-    epoch: u64,
-    pairs: Arc<Vec<(u32, cv::Point2f)>>,
-}
-
-/// One past image's matching: the point (or why none), the homographies to keep as
-/// priors, and which sides were matched guided.
-struct PastResult {
-    result: Result<PastMatch, MatchReject>,
-    /// Ground homographies fitted on this frame.
-    homographies: [Option<Matrix3<f64>>; 2],
-    /// Of sides matched by ORB: ground inliers to track (current, past points).
-    seeds: [Vec<(cv::Point2f, cv::Point2f)>; 2],
-    timing: ChainTiming,
-    steps: Vec<Step>,
-    /// Sides matched again with `retry_ratio_test`.
-    retried: [bool; 2],
+    links: HashMap<KeyframeId, Vec<(KeyframeId, Matrix3<f64>)>>,
 }
 
 fn micros(since: Instant) -> f64 {
@@ -396,53 +346,6 @@ impl VisionChain {
         &mut self.trackers
     }
 
-    /// Whether `frame` of `uav` should run ORB rather than only be tracked: the ring
-    /// may admit it, or a past image it will be matched with has no homography that
-    /// tracking can carry to it. A wrong guess costs time, never accuracy: a pair that
-    /// needs features it lacks gets them late ([`ChainCounts::late_orb`]).
-    pub fn wants_features(
-        &self,
-        uav: Uav,
-        seq: u64,
-        t_s: f64,
-        position: nalgebra::Point3<f64>,
-    ) -> bool {
-        let here = self.predicted_baseline(uav, t_s, position);
-        if self.rings[uav.index()].would_admit(&here) {
-            return true;
-        }
-        let wanted = self.config.images_per_uav - 1;
-        let mut selections = Vec::with_capacity(2);
-        for ring_uav in [Uav::Left, Uav::Right] {
-            let at = if ring_uav == uav {
-                here
-            } else {
-                match self.smoothed[ring_uav.index()] {
-                    Some((_, p)) => p,
-                    None => return false,
-                }
-            };
-            let selected = self.rings[ring_uav.index()].select(&at, seq, wanted);
-            if selected.len() < wanted {
-                // Warming up: no matching, so no features unless admitted.
-                return false;
-            }
-            selections.push((ring_uav, selected));
-        }
-        let Some((epoch, _)) = self.trackers[uav.index()].next_step(seq) else {
-            return true;
-        };
-        selections.iter().any(|(ring_uav, selected)| {
-            selected.iter().any(|kf| {
-                let key = (uav.index(), ring_uav.index(), kf.seq);
-                let anchor = self.priors.get(&key).and_then(|p| p.anchor.as_ref());
-                let known = anchor.is_some_and(|a| a.epoch == epoch)
-                    || self.failed.get(&key).is_some_and(|(e, _)| *e == epoch);
-                !known
-            })
-        })
-    }
-
     /// The smoothed position `track` would give `uav` at this frame.
     fn predicted_baseline(
         &self,
@@ -450,7 +353,13 @@ impl VisionChain {
         t_s: f64,
         p: nalgebra::Point3<f64>,
     ) -> nalgebra::Point3<f64> {
-        smoothed_next(self.smoothed[uav.index()], t_s, p, self.config.baseline_smoothing_s).1
+        smoothed_next(
+            self.smoothed[uav.index()],
+            t_s,
+            p,
+            self.config.baseline_smoothing_s,
+        )
+        .1
     }
 
     /// Adds counts from work done outside the chain (the service's second ORB thread).
@@ -543,7 +452,7 @@ impl VisionChain {
                 continue;
             };
             // The ground homographies fitted on this very frame: its links.
-            let links: Vec<((usize, u64), Matrix3<f64>)> = self
+            let links: Vec<(KeyframeId, Matrix3<f64>)> = self
                 .priors
                 .iter()
                 .filter(|((side, _, _), p)| *side == uav.index() && p.t_s == frame.t_s)
@@ -632,7 +541,13 @@ impl VisionChain {
             .iter()
             .map(|(uav, kf)| {
                 [0, 1].map(|side| {
-                    self.guide(side, *uav, kf.seq, &metas[side], observed[side].motion.as_ref())
+                    self.guide(
+                        side,
+                        *uav,
+                        kf.seq,
+                        &metas[side],
+                        observed[side].motion.as_ref(),
+                    )
                 })
             })
             .collect();
@@ -642,7 +557,8 @@ impl VisionChain {
         for side in 0..2 {
             let unknown = |g: &[Guide; 2]| g[side].tracked.is_none() && g[side].failed.is_none();
             if observed[side].features.is_none() && guides.iter().any(unknown) {
-                let counts = self.trackers[side].ensure_features(&mut observed[side], current[side])?;
+                let counts =
+                    self.trackers[side].ensure_features(&mut observed[side], current[side])?;
                 self.counts += counts;
             }
         }
@@ -694,7 +610,7 @@ impl VisionChain {
         let mut past = Vec::new();
         let mut past_obs = Vec::new();
         let mut new_priors: Vec<(PriorKey, Prior)> = Vec::new();
-        let mut seeds: [Vec<(PriorKey, Vec<(cv::Point2f, cv::Point2f)>)>; 2] = Default::default();
+        let mut seeds: [Vec<(PriorKey, SeedPairs)>; 2] = Default::default();
         let mut failures: [Vec<(PriorKey, MatchReject)>; 2] = Default::default();
         let mut counts = ChainCounts::default();
         let mut steps = Vec::new();
@@ -771,135 +687,6 @@ impl VisionChain {
     }
 }
 
-impl VisionChain {
-    /// What side `side`'s current frame knows of keyframe `seq` of `uav`: the last
-    /// fitted homography if young enough to guide matching, and the tracked
-    /// correspondences if this frame followed the points of that keyframe's anchor.
-    fn guide(
-        &self,
-        side: usize,
-        uav: Uav,
-        seq: u64,
-        frame: &FrameMeta,
-        motion: Option<&Motion>,
-    ) -> Guide {
-        let failed = match (self.failed.get(&(side, uav.index(), seq)), motion) {
-            (Some((epoch, reason)), Some(m)) if *epoch == m.epoch => Some(*reason),
-            _ => None,
-        };
-        let config = &self.config;
-        let Some(prior) = self.priors.get(&(side, uav.index(), seq)) else {
-            return Guide {
-                failed,
-                prior: self.linked_prior(side, uav, seq, frame),
-                ..Guide::default()
-            };
-        };
-        let age = frame.t_s - prior.t_s;
-        let fresh = (0.0..=config.guided_max_age_s).contains(&age);
-        let tracked = match (&prior.anchor, motion) {
-            (Some(a), Some(m)) if a.epoch == m.epoch => Some(join(&a.pairs, &m.tracked)),
-            _ => None,
-        };
-        Guide {
-            prior: (fresh && config.guided_radius_px > 0.0).then_some(prior.homography),
-            tracked,
-            failed,
-        }
-    }
-
-    /// A guide to keyframe `seq` of `uav` that this side has never matched: through
-    /// a past image both were matched with, `H_cur→kf = H_kf→j⁻¹ · H_cur→j` (all ground
-    /// homographies). Without it a newly selected keyframe is matched by brute force,
-    /// the slowest step of the chain (docs/pipeline.md).
-    fn linked_prior(
-        &self,
-        side: usize,
-        uav: Uav,
-        seq: u64,
-        frame: &FrameMeta,
-    ) -> Option<Matrix3<f64>> {
-        let config = &self.config;
-        if config.guided_radius_px <= 0.0 {
-            return None;
-        }
-        self.links.get(&(uav.index(), seq))?.iter().find_map(|((j_uav, j_seq), h_link)| {
-            let p = self.priors.get(&(side, *j_uav, *j_seq))?;
-            let fresh = (0.0..=config.guided_max_age_s).contains(&(frame.t_s - p.t_s));
-            let h = h_link.try_inverse()? * p.homography;
-            (fresh && h.iter().all(|v| v.is_finite())).then_some(h)
-        })
-    }
-
-    /// Hands side `side`'s ground inliers (each past image's, current ↔ past) to its
-    /// tracker, keeps each past image's share as its anchor, and records the past
-    /// images whose fit failed so that tracked frames do not ask for ORB again.
-    fn seed(
-        &mut self,
-        side: usize,
-        frame: &FrameMeta,
-        seeds: Vec<(PriorKey, Vec<(cv::Point2f, cv::Point2f)>)>,
-        failures: Vec<(PriorKey, MatchReject)>,
-    ) {
-        if seeds.is_empty() {
-            return;
-        }
-        // One id per distinct current point (a keypoint can be an inlier with several
-        // past images).
-        let mut ids: HashMap<(u32, u32), u32> = HashMap::new();
-        let mut points = Vec::new();
-        let mut anchors = Vec::with_capacity(seeds.len());
-        for (key, pairs) in seeds {
-            let mut anchor: Vec<(u32, cv::Point2f)> = pairs
-                .iter()
-                .map(|(c, p)| {
-                    let id = *ids.entry((c.x.to_bits(), c.y.to_bits())).or_insert_with(|| {
-                        points.push(*c);
-                        points.len() as u32 - 1
-                    });
-                    (id, *p)
-                })
-                .collect();
-            anchor.sort_by_key(|(id, _)| *id);
-            anchor.dedup_by_key(|(id, _)| *id);
-            anchors.push((key, anchor));
-        }
-        let epoch =
-            self.trackers[side].seed(frame.seq, &points, &frame.intrinsics, &frame.distortion);
-        for (key, pairs) in anchors {
-            if let Some(prior) = self.priors.get_mut(&key) {
-                prior.anchor = epoch.map(|epoch| Anchor {
-                    epoch,
-                    pairs: Arc::new(pairs),
-                });
-            }
-        }
-        if let Some(epoch) = epoch {
-            for (key, reason) in failures {
-                self.failed.insert(key, (epoch, reason));
-            }
-        }
-    }
-}
-
-/// Tracked correspondences: the anchor's past points joined by id with the points the
-/// current frame followed (both sorted by id).
-fn join(
-    anchor: &[(u32, cv::Point2f)],
-    tracked: &TrackedPoints,
-) -> (cv::Vector<cv::Point2f>, cv::Vector<cv::Point2f>) {
-    let (mut current, mut past) = (cv::Vector::new(), cv::Vector::new());
-    let mut a = anchor.iter().peekable();
-    for (id, point) in tracked.ids.iter().zip(&tracked.points) {
-        while a.next_if(|(i, _)| i < id).is_some() {}
-        if let Some((_, p)) = a.next_if(|(i, _)| i == id) {
-            current.push(*point);
-            past.push(*p);
-        }
-    }
-    (current, past)
-}
-
 /// One step of the exponential smoothing of a UAV's measured position (see
 /// `VisionChain::track`): the slot after a frame at `t_s` measured at `p`.
 fn smoothed_next(
@@ -937,194 +724,4 @@ pub fn extract_undistorted(
         ..ChainCounts::default()
     };
     Ok((features, counts))
-}
-
-/// Eq. (24)–(28) for one past image: F_Ln from the current left image, F_Rn from the
-/// current right one, and the intersection of the two epipolar lines. A side with a
-/// prior homography is matched guided first, and by brute force if that fit fails.
-#[allow(clippy::too_many_arguments)]
-fn match_past(
-    config: &MatchingConfig,
-    uav: Uav,
-    kf: &Keyframe,
-    current: &[FrameMeta; 2],
-    detections: [[f64; 2]; 2],
-    features: &[Option<Arc<Features>>; 2],
-    guides: &[Guide; 2],
-    neighbours: &mut Vec<Option<crate::hamming::Nearest2>>,
-) -> PastResult {
-    let job_start = monotonic_ns();
-    let mut out = PastResult {
-        result: Err(MatchReject::FundamentalFailed),
-        homographies: [None, None],
-        seeds: [Vec::new(), Vec::new()],
-        timing: ChainTiming::default(),
-        steps: Vec::new(),
-        retried: [false, false],
-    };
-    let step = |name: &'static str, start_ns: u64| Step {
-        name,
-        uav: uav.index() as u8,
-        keyframe: kf.seq,
-        start_ns,
-        end_ns: monotonic_ns(),
-    };
-    let mut geometry: [Option<PairGeometry>; 2] = [None, None];
-    let mut guided = [false, false];
-    let mut chained = [false, false];
-    for side in 0..2 {
-        // The vertical in the current camera's frame: roll and pitch only (the yaw and
-        // its unknown bias turn about it).
-        let up = camera_to_world(current[side].pose.attitude()).transpose() * Vector3::z();
-        let intrinsics = (&current[side].intrinsics, &kf.intrinsics);
-        let Some(features) = &features[side] else {
-            // No features: `match_current` made sure this side has tracked
-            // correspondences, fitted like matches.
-            let t = Instant::now();
-            let t_ns = monotonic_ns();
-            let result = match (&guides[side].tracked, guides[side].failed) {
-                (Some((a, b)), _) => estimate_fundamental(a, b, intrinsics, &up, config),
-                // Failed on this side's last ORB frame: not retried until the next.
-                (None, Some(reason)) => Err(reason),
-                (None, None) => Err(MatchReject::FundamentalFailed),
-            };
-            out.timing.fundamental_us += micros(t);
-            out.steps.push(step("F", t_ns));
-            match result {
-                Ok(g) => {
-                    chained[side] = true;
-                    out.homographies[side] = g.homography;
-                    geometry[side] = Some(g);
-                    continue;
-                }
-                Err(reason) => {
-                    out.result = Err(reason);
-                    out.steps.push(step("past", job_start));
-                    return out;
-                }
-            }
-        };
-        let mut fit = |guide: Option<&Matrix3<f64>>,
-                       ratio: f32,
-                       timing: &mut ChainTiming,
-                       steps: &mut Vec<Step>| {
-            let t = Instant::now();
-            let t_ns = monotonic_ns();
-            let (a, b) = match guide {
-                Some(h) => match_points_guided(
-                    features,
-                    &kf.features,
-                    h,
-                    config.guided_radius_px as f32,
-                    ratio,
-                    neighbours,
-                ),
-                None => match_points(features, &kf.features, ratio, neighbours),
-            };
-            timing.matching_us += micros(t);
-            steps.push(step("match", t_ns));
-            let t = Instant::now();
-            let t_ns = monotonic_ns();
-            let mut mask = cv::Mat::default();
-            let result = estimate_fundamental_masked(&a, &b, intrinsics, &up, config, &mut mask);
-            timing.fundamental_us += micros(t);
-            steps.push(step("F", t_ns));
-            let seeds = match &result {
-                Ok(g) if config.track_between_orb && g.model == Some(PlaneModel::GroundPlane) => {
-                    ground_seeds(&a, &b, &mask, config.track_points_per_image)
-                }
-                _ => Vec::new(),
-            };
-            (result, seeds)
-        };
-        let mut result = (Err(MatchReject::FundamentalFailed), Vec::new());
-        if let Some(h) = &guides[side].prior {
-            result = fit(Some(h), config.ratio_test, &mut out.timing, &mut out.steps);
-            guided[side] = result.0.is_ok();
-        }
-        if result.0.is_err() {
-            result = fit(None, config.ratio_test, &mut out.timing, &mut out.steps);
-        }
-        // Too little support under the strict ratio: a scene with repeated texture
-        // (windows, lane marks) loses its good matches to the ratio test. Once more,
-        // looser; the robust fit and `min_inliers` still judge the result.
-        let starved = matches!(
-            result.0,
-            Err(MatchReject::TooFewMatches { .. } | MatchReject::TooFewInliers { .. })
-        );
-        if starved && config.retry_ratio_test > config.ratio_test {
-            result = fit(
-                None,
-                config.retry_ratio_test,
-                &mut out.timing,
-                &mut out.steps,
-            );
-            out.retried[side] = true;
-        }
-        let (result, seeds) = result;
-        out.seeds[side] = seeds;
-        match result {
-            Ok(g) => {
-                out.homographies[side] = g.homography;
-                geometry[side] = Some(g);
-            }
-            Err(reason) => {
-                out.result = Err(reason);
-                out.steps.push(step("past", job_start));
-                return out;
-            }
-        }
-    }
-    let [Some(gl), Some(gr)] = geometry else {
-        out.steps.push(step("past", job_start));
-        return out;
-    };
-    let t = Instant::now();
-    let t_ns = monotonic_ns();
-    let pixel = transfer_point(
-        &gl.f,
-        detections[0],
-        &gr.f,
-        detections[1],
-        &ImageBounds {
-            intrinsics: &kf.intrinsics,
-            distortion: &kf.distortion,
-            width: kf.width,
-            height: kf.height,
-        },
-        config,
-    );
-    out.timing.transfer_us += micros(t);
-    out.steps.push(step("transfer", t_ns));
-    out.steps.push(step("past", job_start));
-    out.result = pixel.map(|pixel| PastMatch {
-        uav,
-        seq: kf.seq,
-        pixel,
-        inliers: [gl.inliers, gr.inliers],
-        fundamental: [gl.f, gr.f],
-        models: [gl.model, gr.model],
-        guided,
-        chained,
-    });
-    out
-}
-
-/// Up to `most` ground inliers of a fit (a stride through them, so they stay spread),
-/// as (current, past) points: what the tracker follows until the next ORB frame.
-fn ground_seeds(
-    current: &cv::Vector<cv::Point2f>,
-    past: &cv::Vector<cv::Point2f>,
-    mask: &cv::Mat,
-    most: usize,
-) -> Vec<(cv::Point2f, cv::Point2f)> {
-    let inliers: Vec<usize> = (0..current.len())
-        .filter(|&i| mask.at::<u8>(i as i32).is_ok_and(|m| *m != 0))
-        .collect();
-    let stride = inliers.len().div_ceil(most.max(1)).max(1);
-    inliers
-        .iter()
-        .step_by(stride)
-        .filter_map(|&i| Some((current.get(i).ok()?, past.get(i).ok()?)))
-        .collect()
 }
