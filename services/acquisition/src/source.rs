@@ -125,12 +125,15 @@ pub struct SimSource {
 /// CPU the pipeline leaves; a pair it renders late is counted (`pairs_behind`).
 pub const RENDER_NICE: i32 = 10;
 
-/// A pool of two threads at [`RENDER_NICE`] (nice is per thread on Linux and threads
-/// inherit it). `None` when the pool cannot be built: the renderer then runs at the
-/// service's own priority.
+/// One thread at [`RENDER_NICE`] (nice is per thread on Linux, and the thread the
+/// simulator starts for its second view inherits it). One, not two: every pair then
+/// renders and degrades on the same thread, so its allocations stay in one malloc
+/// arena (with two, the second thread's arena grew mid-run and the soak test saw
+/// acquisition's memory step by two frames). `None` when the pool cannot be built:
+/// the renderer then runs at the service's own priority.
 fn render_pool() -> Option<rayon::ThreadPool> {
     rayon::ThreadPoolBuilder::new()
-        .num_threads(2)
+        .num_threads(1)
         .thread_name(|i| format!("render-{i}"))
         .start_handler(|_| {
             // SAFETY: setpriority on the calling thread's id (gettid) only changes

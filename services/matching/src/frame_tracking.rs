@@ -81,7 +81,7 @@ pub struct Observed {
     pub seq: u64,
     pub features: Option<Arc<Features>>,
     pub motion: Option<Motion>,
-    grey: Option<cv::Mat>,
+    grey: Option<Arc<cv::Mat>>,
 }
 
 impl Observed {
@@ -110,8 +110,9 @@ pub struct TrackReport {
 struct Previous {
     seq: u64,
     t_s: f64,
-    grey: cv::Mat,
-    /// Tracked points in the recorded (distorted) pixels of `grey`, and their ids.
+    /// Its KLT pyramid (level 0 is its grey pixels).
+    pyramid: cv::Vector<cv::Mat>,
+    /// Tracked points in the recorded (distorted) pixels, and their ids.
     points: cv::Vector<cv::Point2f>,
     ids: Vec<u32>,
 }
@@ -131,7 +132,15 @@ pub struct FrameTracker {
     last_orb_seq: Option<u64>,
     /// Shifts this UAV's refreshes against the other's (see `refresh_due`).
     phase: u64,
+    /// Grey images, reused once nobody holds them (the previous frame, pending pairs):
+    /// a steady stream allocates nothing, so the service's memory stays flat.
+    greys: Vec<Arc<cv::Mat>>,
+    /// The pyramid buffers the previous frame gave up, refilled by the next.
+    spare_pyramid: cv::Vector<cv::Mat>,
 }
+
+/// At most this many pooled grey images (a frame held longer gets its own).
+const GREY_POOL: usize = 12;
 
 impl FrameTracker {
     /// The tracker of `uav`'s camera.
@@ -139,6 +148,8 @@ impl FrameTracker {
         let refresh_frames = config.track_refresh_frames.max(1) as u64;
         Ok(Self {
             phase: uav.index() as u64 * refresh_frames / 2,
+            greys: Vec::new(),
+            spare_pyramid: cv::Vector::new(),
             orb: OrbExtractor::new(config)?,
             enabled: config.track_between_orb,
             refresh_frames,
@@ -213,14 +224,27 @@ impl FrameTracker {
             let observed = Observed::with_features(frame.seq, Arc::new(features));
             return Ok((observed, counts, report));
         }
-        let grey = grey_of(frame.image)?;
+        let grey = self.grey_of(frame.image)?;
+        let mut pyramid = std::mem::take(&mut self.spare_pyramid);
+        opencv::video::build_optical_flow_pyramid(
+            &*grey,
+            &mut pyramid,
+            cv::Size::new(KLT_WINDOW, KLT_WINDOW),
+            KLT_LEVELS,
+            false,
+            cv::BORDER_REFLECT_101,
+            cv::BORDER_CONSTANT,
+            // Copy level 0: the grey image goes back to the pool while the pyramid
+            // lives on as the previous frame's.
+            false,
+        )?;
         let had_points = self
             .previous
             .as_ref()
             .is_some_and(|p| p.ids.len() >= self.min_inliers);
         let followed = match self.previous.as_ref() {
             Some(p) if had_points && frame.seq > p.seq && frame.t_s - p.t_s <= MAX_GAP_S => {
-                self.follow(p, &grey, frame)?
+                self.follow(p, &pyramid, frame)?
             }
             _ => None,
         };
@@ -260,17 +284,20 @@ impl FrameTracker {
         }
         let observed = Observed {
             seq: frame.seq,
-            grey: features.is_none().then(|| grey.clone()),
+            grey: features.is_none().then(|| Arc::clone(&grey)),
             features,
             motion,
         };
-        self.previous = Some(Previous {
+        let before = self.previous.replace(Previous {
             seq: frame.seq,
             t_s: frame.t_s,
-            grey,
+            pyramid,
             points,
             ids,
         });
+        if let Some(before) = before {
+            self.spare_pyramid = before.pyramid;
+        }
         Ok((observed, counts, report))
     }
 
@@ -305,10 +332,11 @@ impl FrameTracker {
     fn follow(
         &self,
         previous: &Previous,
-        grey: &cv::Mat,
+        pyramid: &cv::Vector<cv::Mat>,
         frame: &FrameInput,
     ) -> Result<Option<(cv::Vector<cv::Point2f>, Vec<u32>, TrackedPoints)>, ChainError> {
-        if previous.grey.size()? != grey.size()? {
+        let size = |p: &cv::Vector<cv::Mat>| p.get(0).and_then(|m| m.size());
+        if previous.pyramid.len() != pyramid.len() || size(&previous.pyramid)? != size(pyramid)? {
             return Ok(None);
         }
         let mut next = cv::Vector::<cv::Point2f>::new();
@@ -317,8 +345,8 @@ impl FrameTracker {
         let criteria =
             cv::TermCriteria::new(cv::TermCriteria_COUNT + cv::TermCriteria_EPS, 30, 0.01)?;
         opencv::video::calc_optical_flow_pyr_lk(
-            &previous.grey,
-            grey,
+            &previous.pyramid,
+            pyramid,
             &previous.points,
             &mut next,
             &mut status,
@@ -379,14 +407,27 @@ impl FrameTracker {
     }
 }
 
-fn grey_of(image: &cv::Mat) -> Result<cv::Mat, ChainError> {
-    let mut grey = cv::Mat::default();
-    if image.channels() == 3 {
-        opencv::imgproc::cvt_color_def(image, &mut grey, opencv::imgproc::COLOR_BGR2GRAY)?;
-    } else {
-        grey = image.try_clone()?;
+impl FrameTracker {
+    /// The frame's grey pixels, in a pooled image nobody else holds when there is one.
+    fn grey_of(&mut self, image: &cv::Mat) -> Result<Arc<cv::Mat>, ChainError> {
+        let free = self.greys.iter().position(|g| Arc::strong_count(g) == 1);
+        let mut grey = match free {
+            Some(i) => self.greys.swap_remove(i),
+            None => Arc::new(cv::Mat::default()),
+        };
+        let Some(target) = Arc::get_mut(&mut grey) else {
+            return Err(ChainError::OpenCv("a pooled grey image is shared".into()));
+        };
+        if image.channels() == 3 {
+            opencv::imgproc::cvt_color_def(image, target, opencv::imgproc::COLOR_BGR2GRAY)?;
+        } else {
+            image.copy_to(target)?;
+        }
+        if self.greys.len() < GREY_POOL {
+            self.greys.push(Arc::clone(&grey));
+        }
+        Ok(grey)
     }
-    Ok(grey)
 }
 
 #[cfg(test)]
