@@ -71,6 +71,10 @@ pub struct ColourBlobDetector {
     labels: cv::Mat,
     stats: cv::Mat,
     centroids: cv::Mat,
+    /// The window search's own buffers, swapped in while it runs: each set keeps its
+    /// size from frame to frame, so neither is reallocated when the detector switches
+    /// between window and whole frame (the service's memory stays flat).
+    window_scratch: [cv::Mat; 7],
     exposure_retries: u64,
     window_looks: u64,
     window_misses: u64,
@@ -111,6 +115,7 @@ impl ColourBlobDetector {
             labels: cv::Mat::default(),
             stats: cv::Mat::default(),
             centroids: cv::Mat::default(),
+            window_scratch: Default::default(),
             exposure_retries: 0,
             window_looks: 0,
             window_misses: 0,
@@ -126,6 +131,18 @@ impl ColourBlobDetector {
     /// that needed the whole frame after all (since creation).
     pub fn window_counts(&self) -> (u64, u64) {
         (self.window_looks, self.window_misses)
+    }
+
+    /// Swaps the whole-frame buffers with the window search's.
+    fn swap_scratch(&mut self) {
+        let [hsv, mask, part, combined, labels, stats, centroids] = &mut self.window_scratch;
+        std::mem::swap(&mut self.hsv, hsv);
+        std::mem::swap(&mut self.mask, mask);
+        std::mem::swap(&mut self.part, part);
+        std::mem::swap(&mut self.combined, combined);
+        std::mem::swap(&mut self.labels, labels);
+        std::mem::swap(&mut self.stats, stats);
+        std::mem::swap(&mut self.centroids, centroids);
     }
 
     /// The 99th percentile of the V channel of `self.hsv`, 0–255.
@@ -263,24 +280,37 @@ impl ColourBlobDetector {
         // pixels). The answer is the whole frame's whenever the window has one: a blob
         // wholly inside the window has its whole-frame centroid and area, and a blob
         // outside it is farther than `radius` from the hint.
-        let mut origin = [0.0, 0.0];
         let mut best = None;
         let windowed = near.filter(|(_, r)| r.is_finite() && self.config.window_search);
         if let Some((centre, radius)) = windowed {
             if let Some(rect) = window(centre, 2.0 * radius, frame.cols(), frame.rows()) {
                 self.window_looks += 1;
-                let part = cv::Mat::roi(frame, rect)?;
-                opencv::imgproc::cvt_color_def(
-                    &part,
-                    &mut self.hsv,
-                    opencv::imgproc::COLOR_BGR2HSV,
-                )?;
+                self.swap_scratch();
                 let local = [centre[0] - rect.x as f64, centre[1] - rect.y as f64];
-                best = self.pick_blob(value_min, Some((local, radius)), true)?;
-                if best.is_some() {
-                    origin = [rect.x as f64, rect.y as f64];
-                } else {
-                    self.window_misses += 1;
+                let look = cv::Mat::roi(frame, rect)
+                    .and_then(|part| {
+                        opencv::imgproc::cvt_color_def(
+                            &part,
+                            &mut self.hsv,
+                            opencv::imgproc::COLOR_BGR2HSV,
+                        )
+                    })
+                    .map_err(DetectError::from)
+                    .and_then(|()| self.pick_blob(value_min, Some((local, radius)), true));
+                match look {
+                    Ok(Some(found)) => {
+                        let detection = self.detection(found, [rect.x as f64, rect.y as f64]);
+                        self.swap_scratch();
+                        return detection.map(Some);
+                    }
+                    Ok(None) => {
+                        self.swap_scratch();
+                        self.window_misses += 1;
+                    }
+                    Err(e) => {
+                        self.swap_scratch();
+                        return Err(e);
+                    }
                 }
             }
         }
@@ -295,9 +325,19 @@ impl ColourBlobDetector {
                 best = self.pick_blob((value_min * exposure).max(1.0), near, false)?;
             }
         }
-        let Some((label, area)) = best else {
+        let Some(found) = best else {
             return Ok(None);
         };
+        self.detection(found, [0.0, 0.0]).map(Some)
+    }
+
+    /// The detection of blob `label` (of `area` px) in the current buffers, whose
+    /// pixel (0, 0) is the frame's `origin`.
+    fn detection(
+        &self,
+        (label, area): (i32, i32),
+        origin: [f64; 2],
+    ) -> Result<Detection, DetectError> {
         let stat = |k| self.stats.at_2d::<i32>(label, k).map(|v| *v as f64);
         let (left, top) = (
             stat(opencv::imgproc::CC_STAT_LEFT)? + origin[0],
@@ -314,11 +354,11 @@ impl ColourBlobDetector {
         // Confidence: how well the blob fills its box (a car roof fills most of it),
         // scaled so a rotated rectangle (fill ≥ 0.5) still scores high.
         let fill = area as f64 / (w * h);
-        Ok(Some(Detection {
+        Ok(Detection {
             bbox: [left, top, w, h],
             centre,
             confidence: (fill * 1.5).min(1.0) as f32,
-        }))
+        })
     }
 }
 
