@@ -131,15 +131,14 @@ fn main() -> Result<()> {
         "--trace",
         &s("live.trace.json"),
     ])?;
-    run(&[
-        "simulate",
-        "--preset",
-        "default",
-        "--duration-s",
-        &d,
-        "--out",
-        &s("rec"),
-    ])?;
+    // The default scenario recorded as PNG (the format's default) and as JPEG 95.
+    let simulate = |out: &str, extra: &[&str]| {
+        let mut a = vec!["simulate", "--preset", "default", "--duration-s", &d];
+        a.extend_from_slice(extra);
+        a.extend_from_slice(&["--out", out]);
+        run(&a)
+    };
+    simulate(&s("rec"), &[])?;
     run(&[
         "run",
         "--source",
@@ -158,17 +157,7 @@ fn main() -> Result<()> {
         "--out",
         &s("max"),
     ])?;
-    run(&[
-        "simulate",
-        "--preset",
-        "default",
-        "--duration-s",
-        &d,
-        "--jpeg-quality",
-        "95",
-        "--out",
-        &s("rec_jpeg"),
-    ])?;
+    simulate(&s("rec_jpeg"), &["--jpeg-quality", "95"])?;
     run(&[
         "run",
         "--source",
