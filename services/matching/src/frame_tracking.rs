@@ -198,8 +198,8 @@ impl FrameTracker {
             return Ok(ChainCounts::default());
         }
         let Some(grey) = observed.grey.as_ref() else {
-            return Err(ChainError::OpenCv(
-                "a frame without features kept no pixels".into(),
+            return Err(ChainError::Tracking(
+                "a frame without features kept no pixels",
             ));
         };
         let (features, mut counts) =
@@ -416,7 +416,7 @@ impl FrameTracker {
             None => Arc::new(cv::Mat::default()),
         };
         let Some(target) = Arc::get_mut(&mut grey) else {
-            return Err(ChainError::OpenCv("a pooled grey image is shared".into()));
+            return Err(ChainError::Tracking("a pooled grey image is shared"));
         };
         if image.channels() == 3 {
             opencv::imgproc::cvt_color_def(image, target, opencv::imgproc::COLOR_BGR2GRAY)?;

@@ -56,9 +56,10 @@ pub(super) struct Anchor {
 
 impl VisionChain {
     /// Whether `frame` of `uav` should run ORB rather than only be tracked: the ring
-    /// may admit it, or a past image it will be matched with has no homography that
-    /// tracking can carry to it. A wrong guess costs time, never accuracy: a pair that
-    /// needs features it lacks gets them late ([`ChainCounts::late_orb`]).
+    /// may admit it, or a past image it will be matched with has neither an anchor in
+    /// the tracker's epoch nor a failure recorded there. A wrong guess costs time,
+    /// never accuracy: a pair that needs features it lacks gets them late
+    /// ([`super::ChainCounts::late_orb`]).
     pub fn wants_features(
         &self,
         uav: Uav,

@@ -221,6 +221,9 @@ pub enum ChainError {
     Config(String),
     #[error("OpenCV: {0}")]
     OpenCv(String),
+    /// Frame-to-frame tracking lost hold of a frame's pixels (a bug, never input).
+    #[error("frame tracking: {0}")]
+    Tracking(&'static str),
 }
 
 impl From<opencv::Error> for ChainError {
