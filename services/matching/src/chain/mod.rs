@@ -26,7 +26,6 @@ use shared_types::conventions::{Intrinsics, Uav};
 use shared_types::lens::Distortion;
 use shared_types::messages::PoseSample;
 use std::collections::HashMap;
-use std::sync::Arc;
 use std::time::Instant;
 
 /// One current frame as the chain needs it.
@@ -320,14 +319,6 @@ impl VisionChain {
 
     pub fn rings(&self) -> &[KeyframeRing; 2] {
         &self.rings
-    }
-
-    /// ORB features of one frame (BGR or grey), at undistorted positions, with no
-    /// tracking.
-    pub fn extract(&mut self, uav: Uav, frame: &FrameInput) -> Result<Arc<Features>, ChainError> {
-        let (features, counts) = self.trackers[uav.index()].extract(frame)?;
-        self.add_counts(&counts);
-        Ok(Arc::new(features))
     }
 
     /// One current frame of `uav`: tracked from the previous one, with ORB when the
