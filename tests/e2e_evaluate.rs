@@ -58,3 +58,89 @@ fn quick_evaluation_writes_every_table_and_figure() {
         );
     }
 }
+
+/// Issue #23: the Monte Carlo smoke run (two seeds of a short `default` scene under
+/// both navigation-error models) writes its table, JSON and plots, and a second call
+/// resumes from the kept runs instead of flying them again.
+#[test]
+fn monte_carlo_smoke_run_writes_its_report_and_resumes() {
+    let out = std::env::temp_dir().join(format!("dualgeo-e2e-{}-mc", std::process::id()));
+    let _ = std::fs::remove_dir_all(&out);
+    struct Cleanup(std::path::PathBuf);
+    impl Drop for Cleanup {
+        fn drop(&mut self) {
+            let _ = std::fs::remove_dir_all(&self.0);
+        }
+    }
+    let _guard = Cleanup(out.clone());
+    let run = || {
+        let o = Command::new(env!("CARGO_BIN_EXE_dualgeo"))
+            .args([
+                "evaluate",
+                "--monte-carlo",
+                "--quick",
+                "--scenes",
+                "default",
+                "--seeds",
+                "2",
+                "--mc-duration-s",
+                "12",
+                "--out",
+                out.to_str().unwrap(),
+            ])
+            .output()
+            .expect("spawn dualgeo");
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    };
+    run();
+    let md = std::fs::read_to_string(out.join("monte-carlo.md")).unwrap();
+    assert!(md.contains("### white navigation errors"));
+    assert!(md.contains("### correlated navigation errors"));
+    assert_eq!(md.matches("| `default` | 2 |").count(), 2, "{md}");
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("monte-carlo.json")).unwrap())
+            .unwrap();
+    let scenes = json["scenes"].as_array().unwrap();
+    assert_eq!(scenes.len(), 2);
+    for s in scenes {
+        let summary = &s["summary"];
+        assert_eq!(summary["runs"], 2);
+        assert!(summary["estimates"].as_u64().unwrap() > 100, "{s}");
+        for key in [
+            "within_h_acc_pct",
+            "within_v_acc_pct",
+            "mean_nees",
+            "gross_pct",
+        ] {
+            assert!(
+                summary[key].as_f64().is_some_and(f64::is_finite),
+                "{key}: {s}"
+            );
+        }
+    }
+    for png in ["default-white-horizontal", "default-gauss-markov-vertical"] {
+        let bytes = std::fs::read(out.join(format!("monte-carlo/{png}.png"))).unwrap();
+        assert!(
+            bytes.starts_with(b"\x89PNG") && bytes.len() > 10_000,
+            "{png}"
+        );
+    }
+    let runs = out.join("monte-carlo/runs");
+    assert_eq!(std::fs::read_dir(&runs).unwrap().count(), 4);
+    // Resumed: the kept runs are read back, so the figures are the same to the digit.
+    let before = std::fs::read_to_string(out.join("monte-carlo.json")).unwrap();
+    let stamps: Vec<_> = std::fs::read_dir(&runs)
+        .unwrap()
+        .map(|e| e.unwrap().metadata().unwrap().modified().unwrap())
+        .collect();
+    run();
+    assert_eq!(
+        std::fs::read_to_string(out.join("monte-carlo.json")).unwrap(),
+        before
+    );
+    let after: Vec<_> = std::fs::read_dir(&runs)
+        .unwrap()
+        .map(|e| e.unwrap().metadata().unwrap().modified().unwrap())
+        .collect();
+    assert_eq!(stamps, after, "a kept run was flown again");
+}

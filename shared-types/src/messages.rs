@@ -223,6 +223,11 @@ pub struct EstimateMsg {
     pub velocity_acc_mps: f64,
     /// Distance from the left UAV's current (measured) position to the target, m.
     pub range_m: f64,
+    /// How far the estimate can be trusted (issue #23): 0 converging (the yaw biases
+    /// are not yet known; the accuracy is large and honest), 1 tracking, 2 coasting
+    /// (no ray of the current pair taken: the filter's prediction). 64 bits: the
+    /// message has no padding.
+    pub quality: u64,
 }
 
 /// Why an [`EstimateMsg`] carries no estimate.
@@ -258,6 +263,9 @@ pub enum EstimateStatus {
     Rejected = 1,
     /// The observation set itself was malformed (count, non-finite values).
     BadInput = 2,
+    /// An estimate was made but withheld: its h_acc was above `[estimator]
+    /// max_h_acc_m`.
+    Withheld = 3,
 }
 
 #[cfg(test)]
@@ -283,9 +291,9 @@ mod tests {
     #[test]
     fn message_sizes_are_fixed() {
         assert_eq!(std::mem::size_of::<DetectionMsg>(), 96);
-        // 4·8 + 4·4 + 3·8 + 2·8 + 16·8 + 8 + 2·8 + 8 + 8: no padding (the fuzz targets
-        // read it from arbitrary bytes).
-        assert_eq!(std::mem::size_of::<EstimateMsg>(), 256);
+        // 4·8 + 4·4 + 3·8 + 2·8 + 16·8 + 8 + 2·8 + 8 + 8 + 8: no padding (the fuzz
+        // targets read it from arbitrary bytes).
+        assert_eq!(std::mem::size_of::<EstimateMsg>(), 264);
         assert_eq!(std::mem::size_of::<ObservationEntry>(), 112);
         assert_eq!(
             std::mem::size_of::<ObservationSetMsg>(),

@@ -78,8 +78,14 @@ struct Args {
     log_dir: Option<PathBuf>,
 }
 
-/// `--rate max`: pairs sent but not yet finished by matching, at most.
-const MAX_IN_FLIGHT: u64 = 2;
+/// `--rate max`: pairs sent but not yet finished by matching, at most. One, so that a
+/// replay repeats exactly (issue #23): with two in flight, the second pair's frames
+/// reached matching before the first was matched, and whether the first was matched
+/// (or abandoned for the newer one) and which frames ran ORB depended on which process
+/// was scheduled first: three replays of one recording gave three track.csv files.
+/// One in flight costs the overlap of detection with matching (figures in
+/// docs/pipeline.md).
+const MAX_IN_FLIGHT: u64 = 1;
 
 #[derive(Debug, Clone, Copy)]
 enum Rate {

@@ -136,6 +136,10 @@ pub struct EstimatorConfig {
     pub joint_bias_prior_deg: f64,
     /// The temporal filter's tuning (`method = "temporal"`).
     pub temporal: crate::temporal::TemporalConfig,
+    /// Withhold an estimate whose h_acc (√(σ_x² + σ_y²), m) is above this: it is
+    /// published as `Withheld` and counted (`withheld.h_acc`), never sent to ground
+    /// control. 0 = off (the default: every estimate goes out with its honest accuracy).
+    pub max_h_acc_m: f64,
 }
 
 impl Default for EstimatorConfig {
@@ -152,6 +156,7 @@ impl Default for EstimatorConfig {
             joint_huber_k: 2.0,
             joint_bias_prior_deg: 30.0,
             temporal: crate::temporal::TemporalConfig::default(),
+            max_h_acc_m: 0.0,
         }
     }
 }
@@ -182,6 +187,7 @@ impl EstimatorConfig {
         positive(self.consistency_threshold_deg, "consistency_threshold_deg")?;
         positive(self.joint_huber_k, "joint_huber_k")?;
         positive(self.joint_bias_prior_deg, "joint_bias_prior_deg")?;
+        positive(self.max_h_acc_m, "max_h_acc_m")?;
         if self.max_iterations == 0 {
             return Err(EstimatorError::Config(
                 "max_iterations must be at least 1".into(),

@@ -23,6 +23,9 @@ pub struct SetEstimate {
     pub reopened: bool,
     /// Rays the temporal filter gated out.
     pub rays_rejected: usize,
+    /// The temporal filter's quality state; a per-window estimate is `Tracking` (it
+    /// is made from this set's rays alone).
+    pub quality: crate::temporal::Quality,
 }
 
 /// `current` is the current (left, right) pair; `past` the past images with their
@@ -44,6 +47,7 @@ pub fn estimate_set(
             velocity_std_mps: None,
             reopened: false,
             rays_rejected: 0,
+            quality: crate::temporal::Quality::Tracking,
         }),
         Some(filter) => {
             let start = window.as_ref().ok().map(|f| &f.estimate);
@@ -55,6 +59,7 @@ pub fn estimate_set(
                     velocity_std_mps: Some(t.velocity_std_mps),
                     reopened: t.reopened,
                     rays_rejected: t.rays_rejected,
+                    quality: t.quality,
                 })
         }
     }

@@ -43,5 +43,5 @@ pub use error::EstimatorError;
 pub use iteration::{geolocate, Estimate};
 pub use observation::Observation;
 pub use one_shot::one_shot;
-pub use temporal::{ImageId, TemporalEstimate, TemporalEstimator};
+pub use temporal::{ImageId, Quality, TemporalEstimate, TemporalEstimator};
 pub use temporal_snapshot::TemporalSnapshot;

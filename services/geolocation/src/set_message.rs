@@ -53,7 +53,19 @@ pub fn estimate_message(
         stats.count("rejected.non_finite", 1);
         msg.status = EstimateStatus::Rejected as u32;
     }
+    if msg.status == EstimateStatus::Ok as u32
+        && config.max_h_acc_m > 0.0
+        && h_acc(&msg) > config.max_h_acc_m
+    {
+        stats.count("withheld.h_acc", 1);
+        msg.status = EstimateStatus::Withheld as u32;
+    }
     msg
+}
+
+/// √(σ_x² + σ_y²) of an estimate, m.
+pub fn h_acc(msg: &EstimateMsg) -> f64 {
+    (msg.covariance[0] + msg.covariance[5]).max(0.0).sqrt()
 }
 
 fn estimate_unchecked(
@@ -138,6 +150,8 @@ fn estimate_unchecked(
             msg.images_used = e.images_used as u32;
             msg.iterations = e.iterations as u32;
             msg.converged = e.converged as u32;
+            msg.quality = set_estimate.quality as u64;
+            stats.count(&format!("quality.{}", set_estimate.quality.name()), 1);
         }
         Err(e) => {
             stats.count(&format!("rejected.{}", e.kind()), 1);
@@ -203,6 +217,25 @@ mod tests {
         // The filter was not touched: a good set still estimates.
         let msg = estimate_message(&set_at(10.5), &config, Some(&mut temporal), &mut stats);
         assert_eq!(msg.status, EstimateStatus::Ok as u32);
+    }
+
+    #[test]
+    fn estimates_above_max_h_acc_are_withheld_and_counted() {
+        let config = EstimatorConfig::default();
+        let mut temporal = TemporalEstimator::new(config).unwrap();
+        let mut stats = StageStats::new("t");
+        // The first estimate of the filter is converging: its h_acc is large.
+        let open = estimate_message(&set_at(10.0), &config, Some(&mut temporal), &mut stats);
+        assert_eq!(open.status, EstimateStatus::Ok as u32);
+        assert_eq!(open.quality, crate::Quality::Converging as u64);
+        let strict = EstimatorConfig {
+            max_h_acc_m: h_acc(&open) / 2.0,
+            ..config
+        };
+        let mut temporal = TemporalEstimator::new(strict).unwrap();
+        let msg = estimate_message(&set_at(10.0), &strict, Some(&mut temporal), &mut stats);
+        assert_eq!(msg.status, EstimateStatus::Withheld as u32);
+        assert_eq!(stats.counter("withheld.h_acc"), 1);
     }
 
     #[test]

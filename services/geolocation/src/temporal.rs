@@ -46,6 +46,39 @@ const REOPEN_HOLD: usize = 20;
 /// Identifies an image across geolocations: (UAV, frame sequence number).
 pub type ImageId = (Uav, u64);
 
+/// How far an estimate can be trusted (issue #23): `track.csv`'s `quality`, MCAP's
+/// and the report's. Its accuracy is always the filter's covariance; this says why it
+/// is what it is.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Quality {
+    /// The yaw biases are not yet known well (1σ above `converged_bias_sigma_deg`):
+    /// after the start or a re-opening. The stated accuracy is large and honest.
+    #[default]
+    Converging = 0,
+    /// The current pair's rays were taken and the biases are known.
+    Tracking = 1,
+    /// No ray of the current pair was taken (gated out, or none usable): the estimate
+    /// is the filter's prediction, its covariance grows with time.
+    Coasting = 2,
+}
+
+impl Quality {
+    pub fn name(self) -> &'static str {
+        match self {
+            Quality::Converging => "converging",
+            Quality::Tracking => "tracking",
+            Quality::Coasting => "coasting",
+        }
+    }
+
+    pub fn from_index(i: u64) -> Option<Self> {
+        [Quality::Converging, Quality::Tracking, Quality::Coasting]
+            .get(i as usize)
+            .copied()
+    }
+}
+
 /// What the filter adds to an [`Estimate`].
 #[derive(Debug, Clone, PartialEq)]
 pub struct TemporalEstimate {
@@ -59,6 +92,7 @@ pub struct TemporalEstimate {
     pub rays_rejected: usize,
     /// The covariance was re-opened at this update (bias step suspected).
     pub reopened: bool,
+    pub quality: Quality,
 }
 
 /// The filter's tuning (in `EstimatorConfig`).
@@ -71,10 +105,16 @@ pub struct TemporalConfig {
     pub altitude_walk_m_per_sqrt_s: f64,
     /// Random-walk σ of each bias, °/√s (matches a drift of this many °/s over 1 s).
     pub bias_drift_deg_per_sqrt_s: f64,
-    /// σ of the first state: position (m), velocity (m/s) and biases (°).
+    /// σ of the first state: position (m), velocity (m/s) and biases (°). The
+    /// position starts at the first window's estimate; the biases start at **zero**
+    /// with this σ, as wide as a real AHRS's yaw error before any correction (not at
+    /// one window's estimate: on an unseen scene that was 60–80° off, and the filter
+    /// trusted it).
     pub initial_position_sigma_m: f64,
     pub initial_velocity_sigma_mps: f64,
     pub initial_bias_sigma_deg: f64,
+    /// The estimate is `converging` while either bias's 1σ is above this, degrees.
+    pub converged_bias_sigma_deg: f64,
     /// Added to the bias σ when the covariance is re-opened, degrees.
     pub reopen_bias_sigma_deg: f64,
     /// σ of a past image's pixel, which comes from the epipolar transfer, not from the
@@ -94,7 +134,8 @@ impl Default for TemporalConfig {
             bias_drift_deg_per_sqrt_s: 0.2,
             initial_position_sigma_m: 15.0,
             initial_velocity_sigma_mps: 8.0,
-            initial_bias_sigma_deg: 25.0,
+            initial_bias_sigma_deg: 45.0,
+            converged_bias_sigma_deg: 3.0,
             reopen_bias_sigma_deg: 15.0,
             transfer_sigma_px: 4.0,
             transfer_offset_sigma_px: 6.0,
@@ -111,6 +152,7 @@ impl TemporalConfig {
             self.initial_position_sigma_m,
             self.initial_velocity_sigma_mps,
             self.initial_bias_sigma_deg,
+            self.converged_bias_sigma_deg,
             self.reopen_bias_sigma_deg,
             self.transfer_sigma_px,
             self.transfer_offset_sigma_px,
@@ -290,8 +332,8 @@ impl TemporalEstimator {
                     w.position.z,
                     0.0,
                     0.0,
-                    w.yaw_bias[0],
-                    w.yaw_bias[1],
+                    0.0,
+                    0.0,
                 ]);
                 let (sp, sv, sb) = (
                     tc.initial_position_sigma_m,
@@ -482,6 +524,14 @@ impl TemporalEstimator {
                 what: "temporal state",
             });
         }
+        let bias_known =
+            (5..7).all(|i| p[(i, i)].max(0.0).sqrt() <= tc.converged_bias_sigma_deg.to_radians());
+        let current_taken = accepted.iter().any(|&i| i < 2);
+        let quality = match (bias_known, current_taken) {
+            (false, _) => Quality::Converging,
+            (true, true) => Quality::Tracking,
+            (true, false) => Quality::Coasting,
+        };
         let idx = [0, 1, 5, 6];
         let covariance = Matrix4::from_fn(|r, c| p[(idx[r], idx[c])]);
         let out = TemporalEstimate {
@@ -499,6 +549,7 @@ impl TemporalEstimator {
             rays_used: accepted.len(),
             rays_rejected: rays.len() - accepted.len(),
             reopened,
+            quality,
         };
         self.state = Some((t_s, s, p));
         Ok(out)
@@ -599,6 +650,61 @@ mod tests {
             bias_mae.to_degrees()
         );
         assert!(bias_mae < 0.5 * window_mae, "no better than one window");
+    }
+
+    /// Issue #23: an unseen scene started the filter 60–80° off and it claimed ±1.3 m
+    /// while 10–50 m wrong. With biases far from zero, the start must say it does not
+    /// know (large h_acc, `converging`) and never be confidently wrong on the way.
+    #[test]
+    fn a_large_wrong_bias_converges_without_a_confident_wrong_estimate() {
+        for (seed, (left_deg, right_deg)) in [(21, (40.0, -35.0)), (22, (-30.0, 38.0))] {
+            let scenario = SyntheticScenario {
+                bias: BiasModel::Constant {
+                    left_deg,
+                    right_deg,
+                },
+                ..SyntheticScenario::default()
+            };
+            let run = fly(&scenario, 35.0, seed);
+            assert!(run.len() > 200);
+            let h_acc = |e: &TemporalEstimate| {
+                (e.estimate.covariance[(0, 0)] + e.estimate.covariance[(1, 1)]).sqrt()
+            };
+            let mut gross = 0;
+            for (t, e, truth, _) in &run {
+                let d = e.estimate.position - truth;
+                let h = d.x.hypot(d.y);
+                if h > 3.0 * h_acc(e) {
+                    gross += 1;
+                    eprintln!("t {t:.1}: {h:.1} m off, h_acc {:.2} m", h_acc(e));
+                }
+            }
+            assert!(
+                gross * 100 <= run.len(),
+                "{gross} of {} estimates beyond 3 h_acc",
+                run.len()
+            );
+            assert_eq!(run[0].1.quality, Quality::Converging);
+            let late: Vec<_> = run.iter().filter(|(t, ..)| *t > 25.0).collect();
+            let bias_err = late
+                .iter()
+                .map(|(_, e, _, b)| {
+                    (0..2)
+                        .map(|i| (e.estimate.yaw_bias[i] - b[i]).abs())
+                        .sum::<f64>()
+                        / 2.0
+                })
+                .sum::<f64>()
+                / late.len() as f64;
+            assert!(
+                bias_err.to_degrees() < 3.0,
+                "late bias error {:.2}°",
+                bias_err.to_degrees()
+            );
+            assert!(late
+                .iter()
+                .all(|(_, e, ..)| e.quality != Quality::Converging));
+        }
     }
 
     #[test]

@@ -288,6 +288,19 @@ fn essential_as_fundamental(
 /// OpenCV's USAC settings from the config. The explicit `UsacParams` overloads are
 /// used because the `method` overloads ignore `maxIters` on the USAC path (measured,
 /// docs/matching.md). The generator is seeded, so a run is repeatable.
+/// Seeds OpenCV's thread-local RNG (`cv::theRNG`) from what is being computed, before
+/// a robust fit (issue #23: replays repeat exactly). USAC draws its samples from
+/// `random_generator_state` (fixed), but its local optimisation and the classic
+/// RANSAC paths may draw from the calling thread's RNG, whose state depends on which
+/// pool thread ran which job before.
+pub fn seed_cv_rng(parts: &[u64]) -> opencv::Result<()> {
+    let mut h: u64 = 0x9e37_79b9_7f4a_7c15;
+    for p in parts {
+        h = (h ^ p).wrapping_mul(0x0100_0000_01b3).rotate_left(29);
+    }
+    opencv::core::set_rng_seed((h >> 33) as i32)
+}
+
 pub(crate) fn usac_params(
     config: &MatchingConfig,
     threshold: f64,

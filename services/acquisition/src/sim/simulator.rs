@@ -11,10 +11,11 @@ use nalgebra::Point3;
 use opencv::prelude::*;
 use rand::rngs::StdRng;
 use rand::SeedableRng;
-use rand_distr::{Distribution, Normal};
+use rand_distr::Distribution;
 use shared_types::conventions::{camera_to_world, wrap_angle, Attitude, Intrinsics, Uav};
 use shared_types::lens::Distortion;
 use shared_types::messages::PoseSample;
+use shared_types::nav_noise::NavErrorState;
 use std::sync::Arc;
 
 /// One UAV's image at one instant: what was true and what the sensors said.
@@ -46,7 +47,8 @@ pub struct Simulator {
     city: Arc<City>,
     motion: Motion,
     rng: StdRng,
-    noise: [Option<Normal<f64>>; 6],
+    /// Each UAV's navigation errors (white or correlated over time).
+    nav_errors: [NavErrorState; 2],
     intrinsics: Intrinsics,
     seq: u64,
     renderers: [Renderer; 2],
@@ -87,9 +89,6 @@ impl Simulator {
             dt,
         );
         let c = config.camera;
-        let normal = |s: f64| (s > 0.0).then(|| Normal::new(0.0, s).ok()).flatten();
-        let [px, py, pz] = config.noise.sigma_position_m;
-        let [ay, ap, ar] = config.noise.sigma_attitude_deg;
         let intrinsics = Intrinsics::from_hfov(c.width, c.height, c.hfov_deg);
         let lens = Distortion(c.distortion);
         let lens = if lens.is_none() {
@@ -105,14 +104,7 @@ impl Simulator {
             start_s_m: None,
             intrinsics: Intrinsics::from_hfov(c.width, c.height, c.hfov_deg),
             rng: StdRng::seed_from_u64(config.seed),
-            noise: [
-                normal(px),
-                normal(py),
-                normal(pz),
-                normal(ay),
-                normal(ap),
-                normal(ar),
-            ],
+            nav_errors: [NavErrorState::default(); 2],
             city,
             motion,
             seq: 0,
@@ -198,8 +190,10 @@ impl Simulator {
             width: self.config.camera.width,
             height: self.config.camera.height,
         };
-        let mut draw = |k: usize| self.noise[k].map_or(0.0, |n| n.sample(&mut self.rng));
-        let noise = [draw(0), draw(1), draw(2), draw(3), draw(4), draw(5)];
+        let rng = &mut self.rng;
+        let noise = self.nav_errors[i].next(&self.config.noise, state.t_s, || {
+            rand_distr::StandardNormal.sample(rng)
+        });
         let bias = self.config.bias.at(state.t_s)[i];
         let true_pose = pose(x, y, z, yaw, pitch, roll);
         let measured = pose(

@@ -14,9 +14,13 @@
 //!    keyframes are picked by true rather than measured positions (T_re 8 m against a
 //!    σ_pos of at most 5 m).
 
+mod mc_report;
+mod mc_stats;
+pub mod monte_carlo;
 mod noise;
 mod plots;
 mod report;
+mod stream;
 pub mod suite;
 mod suite_report;
 mod vision;
@@ -59,6 +63,26 @@ pub struct EvaluateArgs {
     /// (for tuning; the published table uses the defaults).
     #[arg(long)]
     pub config: Option<PathBuf>,
+    /// Only the Monte Carlo (issue #23): every scene over many seeds; writes
+    /// OUT/monte-carlo.md, OUT/monte-carlo.json and OUT/monte-carlo/*.png. Runs are
+    /// kept in OUT/monte-carlo/runs/ and reused (resumable).
+    #[arg(long, conflicts_with_all = ["suite_only", "no_suite"])]
+    pub monte_carlo: bool,
+    /// Seeds of the `default` scene (default 20; 3 with --quick).
+    #[arg(long)]
+    pub seeds: Option<u64>,
+    /// Seeds of every other scene (default 8; 2 with --quick).
+    #[arg(long)]
+    pub scene_seeds: Option<u64>,
+    /// Navigation-error models to run under (default: both).
+    #[arg(long, value_delimiter = ',', value_enum)]
+    pub nav: Vec<monte_carlo::NavModel>,
+    /// Seconds of each Monte Carlo run (default 20; 14 with --quick).
+    #[arg(long)]
+    pub mc_duration_s: Option<f64>,
+    /// Run every Monte Carlo run again instead of reusing the kept ones.
+    #[arg(long)]
+    pub fresh: bool,
 }
 
 /// Runs the scene suite one scene after another (so the CPU figures are not shared
@@ -172,7 +196,113 @@ pub const STEP_SCENARIO: &str = "bias_step";
 pub const STEP_AT_S: f64 = 20.0;
 pub const STEP_DEG: f64 = 15.0;
 
+/// The Monte Carlo: runs, report, plots.
+fn run_monte_carlo(args: &EvaluateArgs) -> Result<()> {
+    let started = Instant::now();
+    let quick = args.quick;
+    let seeds = args.seeds.unwrap_or(if quick { 3 } else { 20 }).max(1);
+    let scene_seeds = args.scene_seeds.unwrap_or(if quick { 2 } else { 8 }).max(1);
+    let scenes: Vec<(String, u64)> = if args.scenes.is_empty() {
+        std::iter::once(("default".to_string(), seeds))
+            .chain(suite::SUITE.iter().map(|s| (s.to_string(), scene_seeds)))
+            .collect()
+    } else {
+        args.scenes
+            .iter()
+            .map(|s| (s.clone(), if s == "default" { seeds } else { scene_seeds }))
+            .collect()
+    };
+    let duration_s = args
+        .mc_duration_s
+        .unwrap_or(if quick { 14.0 } else { 20.0 });
+    if !(duration_s.is_finite() && duration_s > 0.0) {
+        anyhow::bail!("--mc-duration-s must be > 0, got {duration_s}");
+    }
+    let matching: matching::MatchingConfig =
+        shared_types::shell::load_section(args.config.as_deref(), "matching")?;
+    matching
+        .validate()
+        .map_err(|e| anyhow::anyhow!("[matching]: {e}"))?;
+    let every = args.every.unwrap_or(2).max(1);
+    let dir = args.out.join("monte-carlo");
+    let plan = monte_carlo::Plan {
+        scenes,
+        nav: if args.nav.is_empty() {
+            vec![
+                monte_carlo::NavModel::White,
+                monte_carlo::NavModel::GaussMarkov,
+            ]
+        } else {
+            args.nav.clone()
+        },
+        duration_s,
+        every,
+        matching,
+        cache: (!args.fresh).then(|| dir.join("runs")),
+    };
+    let bar = ProgressBar::new(0);
+    bar.set_style(
+        ProgressStyle::with_template(
+            "{msg:28} {bar:40} {pos}/{len} runs {elapsed_precise} (eta {eta})",
+        )
+        .unwrap_or_else(|_| ProgressStyle::default_bar()),
+    );
+    bar.set_message("Monte Carlo");
+    let all = monte_carlo::run(&plan, &bar)?;
+    bar.finish();
+    let seconds = started.elapsed().as_secs_f64();
+    std::fs::create_dir_all(&dir).with_context(|| format!("create {}", dir.display()))?;
+    let section = mc_report::section(&all, duration_s, every, seconds);
+    let mut md = format!("# Monte Carlo evaluation (issue #23)\n\nRegenerate with `cargo run --release -p dualgeo -- evaluate --monte-carlo` (resumes from `monte-carlo/runs/`; `--fresh` reruns all).\n\n{section}");
+    for s in &all {
+        if s.scene != "default" {
+            continue;
+        }
+        let bins = mc_report::over_time(s, 0.5);
+        let name = format!("default-{}", s.nav.name());
+        for (kind, cols, label) in [
+            ("horizontal", [1usize, 2, 3], "horizontal (m)"),
+            ("vertical", [4, 4, 5], "vertical (m)"),
+        ] {
+            let pick = |c: usize| bins.iter().map(|b| (b[0], b[c])).collect::<Vec<_>>();
+            let mut lines = vec![(format!("median {kind} error"), pick(cols[0]))];
+            if kind == "horizontal" {
+                lines.push(("90th percentile error".into(), pick(cols[1])));
+            }
+            lines.push(("median stated 1σ".into(), pick(cols[2])));
+            let file = dir.join(format!("{name}-{kind}.png"));
+            plots::time_series(
+                &file,
+                &format!(
+                    "default scene, {} errors, {} seeds: {kind} error against the stated 1σ",
+                    s.nav.name(),
+                    s.runs.len()
+                ),
+                label,
+                &lines,
+                &[],
+            )?;
+            md.push_str(&format!(
+                "![{name} {kind}](monte-carlo/{name}-{kind}.png)\n\n"
+            ));
+        }
+    }
+    let path = args.out.join("monte-carlo.md");
+    std::fs::write(&path, &md).with_context(|| format!("write {}", path.display()))?;
+    let json = args.out.join("monte-carlo.json");
+    std::fs::write(&json, serde_json::to_string_pretty(&mc_report::json(&all))?)
+        .with_context(|| format!("write {}", json.display()))?;
+    println!(
+        "{section}Monte Carlo written to {} ({seconds:.0} s)",
+        path.display()
+    );
+    Ok(())
+}
+
 pub fn run(args: &EvaluateArgs) -> Result<()> {
+    if args.monte_carlo {
+        return run_monte_carlo(args);
+    }
     let started = Instant::now();
     let every = args.every.unwrap_or(if args.quick { 10 } else { 2 }).max(1);
     if args.suite_only {

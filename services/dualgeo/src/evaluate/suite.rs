@@ -12,19 +12,11 @@
 //! feeds truth to the chain: truth only scores.
 
 use super::noise::{estimator_for, Calibration, MethodErrors};
-use acquisition::sim::{Presets, SimConfig, Simulator};
+use super::stream::{Lane, SceneStream};
+use acquisition::sim::{Presets, SimConfig};
 use anyhow::{Context, Result};
-use detection::{ColourBlobConfig, TrackedDetector};
-use geolocation::{
-    estimate_set, geolocate_filtered, EstimatorConfig, EstimatorMethod, ImageId, Observation,
-    TemporalEstimator,
-};
-use matching::{ChainCounts, FrameInput, MatchOutcome, MatchingConfig, VisionChain};
+use matching::{ChainCounts, MatchingConfig};
 use nalgebra::Point3;
-use opencv::core as cv;
-use opencv::prelude::*;
-use shared_types::clock::process_cpu_ns;
-use shared_types::conventions::Uav;
 use shared_types::nav_noise::{BiasModel, NavNoise};
 use std::collections::BTreeMap;
 
@@ -95,15 +87,8 @@ pub fn with_protocol(mut config: SimConfig, protocol: usize) -> SimConfig {
     config
 }
 
-/// One protocol's chain and estimators.
-struct Lane {
-    chain: VisionChain,
-    estimator: EstimatorConfig,
-    temporal: TemporalEstimator,
-    result: ProtocolResult,
-}
-
-/// Runs one scene: every `every`-th pair of its route, both protocols.
+/// Runs one scene: every `every`-th pair of its route, both protocols on the same
+/// pixels.
 pub fn run_scene(
     name: &str,
     every: u64,
@@ -121,130 +106,29 @@ pub fn run_scene(
         config.duration_s = d;
     }
     let description = config.description.clone();
-    let (w, h) = (config.camera.width as i32, config.camera.height as i32);
-    let mut sim = Simulator::new(config.clone())?;
-    progress.set_length(progress.length().unwrap_or(0) + sim.frame_count() / every);
-    let mut detector = TrackedDetector::new(ColourBlobConfig::default())?;
+    let mut scene = SceneStream::new(config.clone(), every)?;
+    progress.set_length(progress.length().unwrap_or(0) + scene.pair_count());
     let mut lanes = (0..2)
         .map(|p| {
             let estimator = estimator_for(&with_protocol(config.clone(), p));
-            Ok(Lane {
-                chain: VisionChain::new(matching.clone(), estimator)?,
-                temporal: TemporalEstimator::new(EstimatorConfig {
-                    method: EstimatorMethod::Temporal,
-                    ..estimator
-                })?,
-                estimator,
-                result: ProtocolResult::default(),
-            })
+            Lane::new(matching, estimator, p == 0, true)
         })
         .collect::<Result<Vec<_>>>()?;
-    let mut images = [
-        cv::Mat::new_rows_cols_with_default(h, w, cv::CV_8UC3, cv::Scalar::all(0.0))?,
-        cv::Mat::new_rows_cols_with_default(h, w, cv::CV_8UC3, cv::Scalar::all(0.0))?,
-    ];
-    let lens = sim.distortion();
-    let intrinsics = sim.intrinsics();
-    let mut k = 0;
-    while let Some(step) = sim.step() {
-        k += 1;
-        if k % every != 0 {
+    let mut results = [ProtocolResult::default(), ProtocolResult::default()];
+    while let Some(pair) = scene.next_pair()? {
+        let steps = lanes
+            .iter_mut()
+            .map(|lane| lane.step(&pair))
+            .collect::<Result<Vec<_>>>()?;
+        progress.inc(1);
+        let t_s = pair.step.frames[0].t_s;
+        if t_s < SUITE_WARM_UP_S {
             continue;
         }
-        progress.inc(1);
-        {
-            let [l, r] = &mut images;
-            sim.render_pair(
-                &step,
-                l.data_bytes_mut()?,
-                r.data_bytes_mut()?,
-                3 * w as usize,
-            );
-        }
-        let detections = [
-            detector
-                .detect(0, step.frames[0].t_s, &images[0])?
-                .map(|d| d.centre),
-            detector
-                .detect(1, step.frames[1].t_s, &images[1])?
-                .map(|d| d.centre),
-        ];
-        let t_s = step.frames[0].t_s;
-        let target = Point3::from(step.frames[0].target);
-        let counted = t_s >= SUITE_WARM_UP_S;
-        let visible = [Uav::Left, Uav::Right]
-            .iter()
-            .all(|&uav| sim.target_visible(&step, uav));
-        for (p, lane) in lanes.iter_mut().enumerate() {
-            let inputs: Vec<FrameInput> = step
-                .frames
-                .iter()
-                .zip(&images)
-                .zip(detections)
-                .map(|((f, image), detection)| FrameInput {
-                    seq: f.seq,
-                    t_s: f.t_s,
-                    pose: if p == 0 { f.true_pose } else { f.measured },
-                    image,
-                    detection,
-                    intrinsics,
-                    distortion: lens,
-                    width: w as u32,
-                    height: h as u32,
-                })
-                .collect();
-            let started = process_cpu_ns();
-            let mut observed = [
-                lane.chain.observe(Uav::Left, &inputs[0])?.0,
-                lane.chain.observe(Uav::Right, &inputs[1])?.0,
-            ];
-            let metas = [inputs[0].meta(), inputs[1].meta()];
-            let mut timing = matching::ChainTiming::default();
-            let mut rejections = Vec::new();
-            let outcome = lane.chain.match_current(
-                [&metas[0], &metas[1]],
-                &mut observed,
-                &mut timing,
-                &mut rejections,
-            )?;
-            let mut cpu_us = 0.0;
-            let estimate = match &outcome {
-                MatchOutcome::Matched(set) => {
-                    let past: Vec<(ImageId, Observation)> = set
-                        .past
-                        .iter()
-                        .zip(&set.past_observations)
-                        .map(|(m, o)| ((m.uav, m.seq), *o))
-                        .collect();
-                    let current = [&set.current[0], &set.current[1]];
-                    let default = estimate_set(
-                        t_s,
-                        current,
-                        &past,
-                        &lane.temporal_config(),
-                        Some(&mut lane.temporal),
-                    );
-                    // What the pipeline spends ends here; the paper's method is scored
-                    // on the same set but not timed.
-                    cpu_us = process_cpu_ns().saturating_sub(started) as f64 / 1e3;
-                    let paper = geolocate_filtered(
-                        &set.current[0],
-                        &set.current[1],
-                        &set.past_observations,
-                        &lane.estimator,
-                    );
-                    Some((default, paper))
-                }
-                _ => None,
-            };
-            lane.chain.admit([&metas[0], &metas[1]], &mut observed)?;
-            let counts = lane.chain.take_counts();
-            if !counted {
-                continue;
-            }
-            let r = &mut lane.result;
-            r.counts += counts;
-            for (_, _, reason) in &rejections {
+        let target = Point3::from(pair.step.frames[0].target);
+        for (p, (r, lane)) in results.iter_mut().zip(steps).enumerate() {
+            r.counts += lane.counts;
+            for (_, _, reason) in &lane.rejections {
                 *r.rejected.entry(reason.kind()).or_default() += 1;
             }
             // The yaw biases of the protocol's model, radians (truth for scoring only).
@@ -253,16 +137,16 @@ pub fn run_scene(
             } else {
                 config.bias.at(t_s)
             };
-            let located = matches!(&estimate, Some((Ok(_), _)));
-            if visible {
+            let located = matches!(&lane.default, Some(Ok(_)));
+            if pair.visible {
                 r.visible += 1;
                 r.located += located as usize;
             } else {
                 r.not_visible += 1;
                 r.located_not_visible += located as usize;
             }
-            if let Some((default, paper)) = estimate {
-                r.cpu_us.push(cpu_us);
+            if let Some(default) = lane.default {
+                r.cpu_us.push(lane.cpu_us);
                 if let Ok(e) = default {
                     r.default.push(
                         e.estimate.position,
@@ -271,34 +155,23 @@ pub fn run_scene(
                     );
                     r.calibration.push(&e.estimate, target);
                 }
-                match paper {
-                    Ok(f) => r.paper.push(
+                match lane.paper {
+                    Some(Ok(f)) => r.paper.push(
                         f.estimate.position,
                         target,
                         Some((f.estimate.yaw_bias, bias_truth)),
                     ),
-                    Err(_) => r.paper.rejected += 1,
+                    _ => r.paper.rejected += 1,
                 }
             }
         }
     }
-    let [a, b]: [Lane; 2] = lanes
-        .try_into()
-        .map_err(|_| anyhow::anyhow!("two protocol lanes"))?;
+    let [a, b] = results;
     Ok(SceneResult {
         name: name.into(),
         description,
-        protocols: [a.result, b.result],
+        protocols: [a, b],
     })
-}
-
-impl Lane {
-    fn temporal_config(&self) -> EstimatorConfig {
-        EstimatorConfig {
-            method: EstimatorMethod::Temporal,
-            ..self.estimator
-        }
-    }
 }
 
 /// Median of a sample (NaN when empty).

@@ -6,7 +6,9 @@
 //!
 //! Columns: t_s, pair_seq, x_m, y_m, z_m, lat_deg, lon_deg, alt_m (empty without a
 //! geodetic origin), yaw_bias_left_deg, yaw_bias_right_deg, images_used, iterations,
-//! h_acc_m, v_acc_m (1σ horizontal and vertical accuracy).
+//! h_acc_m, v_acc_m (1σ horizontal and vertical accuracy), quality (`converging`: the
+//! yaw biases are not yet known and the accuracy says so; `tracking`; `coasting`: no
+//! ray of the current pair was taken, the estimate is the filter's prediction).
 
 use acquisition::recording::Origin;
 use anyhow::{Context, Result};
@@ -17,7 +19,7 @@ use std::time::{Duration, Instant};
 
 pub const FLUSH_EVERY: Duration = Duration::from_millis(500);
 
-const HEADER: [&str; 14] = [
+const HEADER: [&str; 15] = [
     "t_s",
     "pair_seq",
     "x_m",
@@ -32,6 +34,7 @@ const HEADER: [&str; 14] = [
     "iterations",
     "h_acc_m",
     "v_acc_m",
+    "quality",
 ];
 
 pub fn geodetic(origin: &Origin, p: &[f64; 3]) -> (f64, f64, f64) {
@@ -107,6 +110,9 @@ impl TrackWriter {
                 e.iterations.to_string(),
                 sigma.map_or(String::new(), |(h, _)| format!("{h:.3}")),
                 sigma.map_or(String::new(), |(_, v)| format!("{v:.3}")),
+                geolocation::Quality::from_index(e.quality)
+                    .map_or("unknown", |q| q.name())
+                    .to_string(),
             ])
             .with_context(|| format!("write {}", self.path.display()))?;
         self.rows += 1;

@@ -565,6 +565,15 @@ impl VisionChain {
             chunk
                 .iter()
                 .map(|((uav, kf), prior)| {
+                    // Same fit, same draws, whichever pool thread runs it.
+                    if let Err(e) = crate::epipolar::seed_cv_rng(&[
+                        uav.index() as u64,
+                        kf.seq,
+                        metas[0].seq,
+                        metas[1].seq,
+                    ]) {
+                        tracing::warn!("cv RNG not seeded: {e}");
+                    }
                     match_past(
                         config,
                         *uav,

@@ -1,0 +1,237 @@
+//! A simulated scene streamed through the whole chain in one process, as the scene suite
+//! and the Monte Carlo evaluation need it: the simulator renders each pair, the colour
+//! detector (with its track) finds the target, and each [`Lane`] runs its own vision
+//! chain and estimators on the same pixels. Truth comes along for scoring only; nothing
+//! here gives it to the chain or the estimators.
+
+use acquisition::sim::{SimConfig, SimStep, Simulator};
+use anyhow::Result;
+use detection::{ColourBlobConfig, TrackedDetector};
+use geolocation::{
+    estimate_set, geolocate_filtered, EstimatorConfig, EstimatorError, EstimatorMethod,
+    FilteredEstimate, ImageId, Observation, SetEstimate, TemporalEstimator,
+};
+use matching::epipolar::MatchReject;
+use matching::{ChainCounts, FrameInput, MatchOutcome, MatchingConfig, VisionChain};
+use opencv::core as cv;
+use opencv::prelude::*;
+use shared_types::clock::process_cpu_ns;
+use shared_types::conventions::{Intrinsics, Uav};
+use shared_types::lens::Distortion;
+
+/// What every frame of a scene shares.
+#[derive(Debug, Clone, Copy)]
+pub struct FrameGeometry {
+    pub intrinsics: Intrinsics,
+    pub lens: Distortion,
+    pub width: u32,
+    pub height: u32,
+}
+
+/// One rendered pair with its detections.
+pub struct Pair<'a> {
+    pub step: SimStep,
+    pub geometry: FrameGeometry,
+    pub images: &'a [cv::Mat; 2],
+    pub detections: [Option<[f64; 2]>; 2],
+    /// The target inside both images and not hidden (truth, for scoring).
+    pub visible: bool,
+}
+
+/// The scene's renderer, detector and the frame geometry every lane shares.
+pub struct SceneStream {
+    sim: Simulator,
+    detector: TrackedDetector,
+    images: [cv::Mat; 2],
+    every: u64,
+    k: u64,
+    geometry: FrameGeometry,
+}
+
+impl SceneStream {
+    /// Streams every `every`-th pair of `config`'s route.
+    pub fn new(config: SimConfig, every: u64) -> Result<Self> {
+        let (w, h) = (config.camera.width as i32, config.camera.height as i32);
+        let sim = Simulator::new(config)?;
+        let blank = || cv::Mat::new_rows_cols_with_default(h, w, cv::CV_8UC3, cv::Scalar::all(0.0));
+        Ok(Self {
+            geometry: FrameGeometry {
+                intrinsics: sim.intrinsics(),
+                lens: sim.distortion(),
+                width: w as u32,
+                height: h as u32,
+            },
+            sim,
+            detector: TrackedDetector::new(ColourBlobConfig::default())?,
+            images: [blank()?, blank()?],
+            every: every.max(1),
+            k: 0,
+        })
+    }
+
+    /// Pairs this stream will give.
+    pub fn pair_count(&self) -> u64 {
+        self.sim.frame_count() / self.every
+    }
+
+    /// The next pair, rendered and detected, or `None` at the end of the route.
+    pub fn next_pair(&mut self) -> Result<Option<Pair<'_>>> {
+        let step = loop {
+            let Some(step) = self.sim.step() else {
+                return Ok(None);
+            };
+            self.k += 1;
+            if self.k.is_multiple_of(self.every) {
+                break step;
+            }
+        };
+        {
+            let [l, r] = &mut self.images;
+            let stride = 3 * self.geometry.width as usize;
+            self.sim
+                .render_pair(&step, l.data_bytes_mut()?, r.data_bytes_mut()?, stride);
+        }
+        let mut detections = [None, None];
+        for (i, d) in detections.iter_mut().enumerate() {
+            *d = self
+                .detector
+                .detect(i, step.frames[i].t_s, &self.images[i])?
+                .map(|d| d.centre);
+        }
+        let visible = [Uav::Left, Uav::Right]
+            .iter()
+            .all(|&uav| self.sim.target_visible(&step, uav));
+        Ok(Some(Pair {
+            step,
+            geometry: self.geometry,
+            images: &self.images,
+            detections,
+            visible,
+        }))
+    }
+}
+
+/// What one lane made of one pair.
+pub struct LaneStep {
+    /// `None` when matching gave no set (no detection, not enough history).
+    pub default: Option<Result<SetEstimate, EstimatorError>>,
+    /// The paper's method on the same set, when the lane scores it.
+    pub paper: Option<Result<FilteredEstimate, EstimatorError>>,
+    /// Process CPU time of the chain and the default estimate, µs.
+    pub cpu_us: f64,
+    pub counts: ChainCounts,
+    pub rejections: Vec<(Uav, u64, MatchReject)>,
+}
+
+/// One chain and its estimators: the poses it is given decide the protocol.
+pub struct Lane {
+    chain: VisionChain,
+    pub estimator: EstimatorConfig,
+    temporal: TemporalEstimator,
+    /// Give the chain the true poses (Table 1) instead of the measured ones.
+    true_poses: bool,
+    /// Also run the paper's method on each matched set (not timed).
+    score_paper: bool,
+}
+
+impl Lane {
+    pub fn new(
+        matching: &MatchingConfig,
+        estimator: EstimatorConfig,
+        true_poses: bool,
+        score_paper: bool,
+    ) -> Result<Self> {
+        Ok(Self {
+            chain: VisionChain::new(matching.clone(), estimator)?,
+            temporal: TemporalEstimator::new(Self::temporal_config(&estimator))?,
+            estimator,
+            true_poses,
+            score_paper,
+        })
+    }
+
+    fn temporal_config(estimator: &EstimatorConfig) -> EstimatorConfig {
+        EstimatorConfig {
+            method: EstimatorMethod::Temporal,
+            ..*estimator
+        }
+    }
+
+    /// Runs the chain and the estimators on one pair.
+    pub fn step(&mut self, pair: &Pair) -> Result<LaneStep> {
+        let g = pair.geometry;
+        let inputs: Vec<FrameInput> = pair
+            .step
+            .frames
+            .iter()
+            .zip(pair.images)
+            .zip(pair.detections)
+            .map(|((f, image), detection)| FrameInput {
+                seq: f.seq,
+                t_s: f.t_s,
+                pose: if self.true_poses {
+                    f.true_pose
+                } else {
+                    f.measured
+                },
+                image,
+                detection,
+                intrinsics: g.intrinsics,
+                distortion: g.lens,
+                width: g.width,
+                height: g.height,
+            })
+            .collect();
+        let started = process_cpu_ns();
+        let mut observed = [
+            self.chain.observe(Uav::Left, &inputs[0])?.0,
+            self.chain.observe(Uav::Right, &inputs[1])?.0,
+        ];
+        let metas = [inputs[0].meta(), inputs[1].meta()];
+        let mut timing = matching::ChainTiming::default();
+        let mut rejections = Vec::new();
+        let outcome = self.chain.match_current(
+            [&metas[0], &metas[1]],
+            &mut observed,
+            &mut timing,
+            &mut rejections,
+        )?;
+        let mut cpu_us = 0.0;
+        let (mut default, mut paper) = (None, None);
+        if let MatchOutcome::Matched(set) = &outcome {
+            let past: Vec<(ImageId, Observation)> = set
+                .past
+                .iter()
+                .zip(&set.past_observations)
+                .map(|(m, o)| ((m.uav, m.seq), *o))
+                .collect();
+            let current = [&set.current[0], &set.current[1]];
+            default = Some(estimate_set(
+                pair.step.frames[0].t_s,
+                current,
+                &past,
+                &Self::temporal_config(&self.estimator),
+                Some(&mut self.temporal),
+            ));
+            // What the pipeline spends ends here; the paper's method is scored on the
+            // same set but not timed.
+            cpu_us = process_cpu_ns().saturating_sub(started) as f64 / 1e3;
+            if self.score_paper {
+                paper = Some(geolocate_filtered(
+                    &set.current[0],
+                    &set.current[1],
+                    &set.past_observations,
+                    &self.estimator,
+                ));
+            }
+        }
+        self.chain.admit([&metas[0], &metas[1]], &mut observed)?;
+        Ok(LaneStep {
+            default,
+            paper,
+            cpu_us,
+            counts: self.chain.take_counts(),
+            rejections,
+        })
+    }
+}
