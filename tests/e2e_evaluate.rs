@@ -1,18 +1,15 @@
 //! End-to-end: `dualgeo evaluate --quick` writes the whole report and its plots.
 
+#[path = "support/scratch.rs"]
+mod scratch;
+
+use scratch::Scratch;
 use std::process::Command;
 
 #[test]
 fn quick_evaluation_writes_every_table_and_figure() {
-    let out = std::env::temp_dir().join(format!("dualgeo-e2e-{}-evaluate", std::process::id()));
-    let _ = std::fs::remove_dir_all(&out);
-    struct Cleanup(std::path::PathBuf);
-    impl Drop for Cleanup {
-        fn drop(&mut self) {
-            let _ = std::fs::remove_dir_all(&self.0);
-        }
-    }
-    let _guard = Cleanup(out.clone());
+    let dir = Scratch::new("evaluate");
+    let out = dir.0.clone();
     let o = Command::new(env!("CARGO_BIN_EXE_dualgeo"))
         .args([
             "evaluate",
@@ -61,19 +58,12 @@ fn quick_evaluation_writes_every_table_and_figure() {
 
 /// Issue #23: the Monte Carlo smoke run (two seeds of a short `default` scene under
 /// both navigation-error models) writes its table, JSON and plots, and a second call
-/// resumes from the kept runs instead of flying them again.
+/// resumes from the kept runs instead of flying them again; flown again, they repeat.
 #[test]
 fn monte_carlo_smoke_run_writes_its_report_and_resumes() {
-    let out = std::env::temp_dir().join(format!("dualgeo-e2e-{}-mc", std::process::id()));
-    let _ = std::fs::remove_dir_all(&out);
-    struct Cleanup(std::path::PathBuf);
-    impl Drop for Cleanup {
-        fn drop(&mut self) {
-            let _ = std::fs::remove_dir_all(&self.0);
-        }
-    }
-    let _guard = Cleanup(out.clone());
-    let run = || {
+    let dir = Scratch::new("mc");
+    let out = dir.0.clone();
+    let run = |fresh: bool| {
         let o = Command::new(env!("CARGO_BIN_EXE_dualgeo"))
             .args([
                 "evaluate",
@@ -88,11 +78,12 @@ fn monte_carlo_smoke_run_writes_its_report_and_resumes() {
                 "--out",
                 out.to_str().unwrap(),
             ])
+            .args(fresh.then_some("--fresh"))
             .output()
             .expect("spawn dualgeo");
         assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     };
-    run();
+    run(false);
     let md = std::fs::read_to_string(out.join("monte-carlo.md")).unwrap();
     assert!(md.contains("### white navigation errors"));
     assert!(md.contains("### correlated navigation errors"));
@@ -142,11 +133,27 @@ fn monte_carlo_smoke_run_writes_its_report_and_resumes() {
         .unwrap()
         .map(|e| e.unwrap().metadata().unwrap().modified().unwrap())
         .collect();
-    run();
+    run(false);
     assert_eq!(rows(), before);
     let after: Vec<_> = std::fs::read_dir(&runs)
         .unwrap()
         .map(|e| e.unwrap().metadata().unwrap().modified().unwrap())
         .collect();
     assert_eq!(stamps, after, "a kept run was flown again");
+    // Item 6: flown again (`--fresh`), every run is the same to the last bit.
+    let contents = || -> Vec<(std::ffi::OsString, Vec<u8>)> {
+        let mut v: Vec<_> = std::fs::read_dir(&runs)
+            .unwrap()
+            .map(|e| {
+                let e = e.unwrap();
+                (e.file_name(), std::fs::read(e.path()).unwrap())
+            })
+            .collect();
+        v.sort();
+        v
+    };
+    let kept = contents();
+    run(true);
+    assert_eq!(contents(), kept, "a run flown again gave another result");
+    assert_eq!(rows(), before);
 }

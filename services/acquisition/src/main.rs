@@ -12,9 +12,11 @@
 //! the process idles until it is told to stop (SIGTERM), so nothing it sent is lost.
 //!
 //! Pacing: `realtime` follows the recording's (or simulator's) clock and never waits
-//! for anyone; `max` is flow-controlled instead: at most two pairs ahead of matching,
+//! for anyone; `max` is flow-controlled instead: one pair ahead of matching at most,
 //! which acknowledges every pair it finishes (or drops) on the `wake/acquisition` event
-//! service. A missing acknowledgement is given up after 1 s (`flow_timeouts`).
+//! service. A missing acknowledgement is given up after 1 s (`flow_timeouts`); a late
+//! one never counts beyond the pairs sent, so a timeout cannot open a second slot.
+//! The end of the stream is announced once the last pair is acknowledged.
 //!
 //! Restart (issue #13): with `--state-dir`, the stream position is checkpointed before
 //! each pair is sent ([`acquisition::resume`]). A restarted acquisition (incarnation > 0)
@@ -45,13 +47,14 @@ use acquisition::sim::ScenarioArgs;
 use acquisition::source::{FrameSource, SourceError};
 use anyhow::{bail, Context, Result};
 use clap::Parser;
+use iceoryx2::port::listener::Listener;
 use iceoryx2::prelude::EventId;
 use shared_types::clock::{elapsed_us, monotonic_ns};
 use shared_types::conventions::Uav;
 use shared_types::messages::{FrameHeader, PixelFormat};
 use shared_types::shell::{init_tracing, ServiceArgs, StatsSaver};
 use shared_types::stats::StageStats;
-use shared_types::transport::{Endpoint, FramePublisher, Stage, END_OF_STREAM_EVENT};
+use shared_types::transport::{Endpoint, FramePublisher, Ipc, Stage, END_OF_STREAM_EVENT};
 use std::path::PathBuf;
 use std::time::Duration;
 
@@ -131,6 +134,40 @@ fn wait_until(endpoint: &Endpoint, due_ns: u64) -> bool {
             return false;
         }
     }
+}
+
+/// `--rate max` flow control: waits until fewer than `limit` pairs of the `seq` sent
+/// are unacknowledged. A second without any acknowledgement gives the pair up
+/// (`flow_timeouts`: matching lost it); acknowledgements never count beyond the pairs
+/// sent, so a late one after a timeout cannot open an extra slot. `false` on a stop
+/// request.
+fn await_acks(
+    listener: &Listener<Ipc>,
+    endpoint: &Endpoint,
+    stats: &mut StageStats,
+    acknowledged: &mut u64,
+    seq: u64,
+    limit: u64,
+) -> Result<bool> {
+    let mut waited = false;
+    while seq.saturating_sub(*acknowledged) >= limit {
+        if waited {
+            stats.count("flow_timeouts", 1);
+            *acknowledged = seq;
+            break;
+        }
+        listener
+            .timed_wait(
+                |e| *acknowledged = (*acknowledged + e.count).min(seq),
+                Duration::from_secs(1),
+            )
+            .map_err(|e| anyhow::anyhow!("acknowledgement listener: {e:?}"))?;
+        waited = seq.saturating_sub(*acknowledged) >= limit;
+        if endpoint.node.wait(Duration::ZERO).is_err() {
+            return Ok(false);
+        }
+    }
+    Ok(true)
 }
 
 /// Adds what the source counted since the last call to `stats`, as `source.<name>`.
@@ -245,22 +282,16 @@ fn main() -> Result<()> {
             break 'stream;
         }
         if let Some(listener) = &acks {
-            let mut waited = false;
-            while seq.saturating_sub(acknowledged) >= MAX_IN_FLIGHT {
-                if waited {
-                    // No acknowledgement for a second: matching lost a pair; go on.
-                    stats.count("flow_timeouts", 1);
-                    acknowledged = seq;
-                    break;
-                }
-                listener
-                    .timed_wait(|e| acknowledged += e.count, Duration::from_secs(1))
-                    .map_err(|e| anyhow::anyhow!("acknowledgement listener: {e:?}"))?;
-                waited = seq.saturating_sub(acknowledged) >= MAX_IN_FLIGHT;
-                if endpoint.node.wait(Duration::ZERO).is_err() {
-                    signalled = true;
-                    break 'stream;
-                }
+            if !await_acks(
+                listener,
+                &endpoint,
+                &mut stats,
+                &mut acknowledged,
+                seq,
+                MAX_IN_FLIGHT,
+            )? {
+                signalled = true;
+                break 'stream;
             }
         }
         // Loan both samples first: a pair is only produced when both fit.
@@ -491,6 +522,11 @@ fn main() -> Result<()> {
             .map(|(f, n)| format!("{} {n}", f.name()))
             .collect();
         tracing::warn!("live input faults: {}", totals.join(", "));
+    }
+    // `--rate max`: the last pair is answered before the end is announced, so the
+    // supervisor's drain never races the last estimate.
+    if let (false, Some(listener)) = (signalled, &acks) {
+        signalled = !await_acks(listener, &endpoint, &mut stats, &mut acknowledged, seq, 1)?;
     }
     if !signalled {
         tracing::info!(pairs = seq, "end of stream");

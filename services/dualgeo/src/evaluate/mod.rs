@@ -238,7 +238,8 @@ fn run_monte_carlo(args: &EvaluateArgs) -> Result<()> {
         duration_s,
         every,
         matching,
-        cache: (!args.fresh).then(|| dir.join("runs")),
+        cache: Some(dir.join("runs")),
+        reuse: !args.fresh,
     };
     let bar = ProgressBar::new(0);
     bar.set_style(

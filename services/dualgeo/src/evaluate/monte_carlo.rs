@@ -31,7 +31,7 @@ pub const WARM_UP_S: f64 = 10.0;
 
 /// Bumped when the code changes what a run gives for the same inputs, so cached runs
 /// of an older build are not reused.
-const RUN_FORMAT: u32 = 1;
+const RUN_FORMAT: u32 = 2;
 
 /// The navigation-error models the Monte Carlo runs under.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize, clap::ValueEnum)]
@@ -94,7 +94,11 @@ pub struct Plan {
     pub duration_s: f64,
     pub every: u64,
     pub matching: MatchingConfig,
+    /// Where each run is kept (`runs/`), written after every run.
     pub cache: Option<PathBuf>,
+    /// Whether a kept run with the same key is read back instead of run again
+    /// (`--fresh` turns it off; the runs are still written).
+    pub reuse: bool,
 }
 
 /// One (scene, navigation model): its runs and their summary.
@@ -261,7 +265,7 @@ fn run_cached(
 ) -> Result<RunRecord> {
     let key = run_key(config, plan.every, &plan.matching);
     let file = plan.cache.as_ref().map(|d| cache_file(d, scene, nav, seed));
-    if let Some(f) = &file {
+    if let (Some(f), true) = (&file, plan.reuse) {
         if let Ok(text) = std::fs::read_to_string(f) {
             if let Ok(c) = serde_json::from_str::<Cached>(&text) {
                 if c.key == key {

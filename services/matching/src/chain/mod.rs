@@ -25,7 +25,7 @@ use opencv::core as cv;
 use shared_types::conventions::{Intrinsics, Uav};
 use shared_types::lens::Distortion;
 use shared_types::messages::PoseSample;
-use std::collections::HashMap;
+use std::collections::BTreeMap;
 use std::time::Instant;
 
 /// One current frame as the chain needs it.
@@ -278,15 +278,15 @@ pub struct VisionChain {
     pub(crate) smoothed: [Option<(f64, nalgebra::Point3<f64>)>; 2],
     /// Guided-matching priors: the last ground homography from each current side to
     /// each keyframe.
-    priors: HashMap<PriorKey, Prior>,
+    priors: BTreeMap<PriorKey, Prior>,
     /// Past images whose fit failed on a current side's last ORB frame, with the
     /// tracking epoch that frame began and the reason: not retried before the side's
     /// next ORB frame.
-    failed: HashMap<PriorKey, (u64, MatchReject)>,
+    failed: BTreeMap<PriorKey, (u64, MatchReject)>,
     /// Per keyframe (UAV, seq): the ground homographies from it to the past images it
     /// was matched with as a current frame, so that a current frame with a prior for
     /// one of those can be guided to it without brute force.
-    links: HashMap<KeyframeId, Vec<(KeyframeId, Matrix3<f64>)>>,
+    links: BTreeMap<KeyframeId, Vec<(KeyframeId, Matrix3<f64>)>>,
 }
 
 fn micros(since: Instant) -> f64 {
@@ -309,9 +309,9 @@ impl VisionChain {
             ],
             rings: [ring(), ring()],
             smoothed: [None, None],
-            priors: HashMap::new(),
-            failed: HashMap::new(),
-            links: HashMap::new(),
+            priors: BTreeMap::new(),
+            failed: BTreeMap::new(),
+            links: BTreeMap::new(),
             config,
             estimator,
         })
