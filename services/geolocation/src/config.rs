@@ -18,6 +18,16 @@ pub struct NoiseModel {
     pub sigma_pitch_deg: f64,
     pub sigma_roll_deg: f64,
     pub sigma_yaw_deg: f64,
+    /// Time constant of the position error, seconds: 0 (the default, the paper's
+    /// model) draws it afresh for every sample; above 0 it is a first-order
+    /// Gauss–Markov process whose stationary σ is `sigma_position_m`, plus white
+    /// `position_jitter_m`, as a consumer GPS wanders (the temporal filter then
+    /// carries it as a state per UAV and cannot average it away).
+    pub position_tau_s: f64,
+    pub position_jitter_m: f64,
+    /// The same for the attitude errors (σ's of yaw, pitch, roll above).
+    pub attitude_tau_s: f64,
+    pub attitude_jitter_deg: f64,
 }
 
 impl NoiseModel {
@@ -29,7 +39,16 @@ impl NoiseModel {
             sigma_pitch_deg: sigma_att_deg,
             sigma_roll_deg: sigma_att_deg,
             sigma_yaw_deg: sigma_att_deg,
+            position_tau_s: 0.0,
+            position_jitter_m: 0.0,
+            attitude_tau_s: 0.0,
+            attitude_jitter_deg: 0.0,
         }
+    }
+
+    /// Whether any error is correlated over time (a Gauss–Markov state in the filter).
+    pub fn is_correlated(&self) -> bool {
+        self.position_tau_s > 0.0 || self.attitude_tau_s > 0.0
     }
 
     /// Variances of τ1 in the order of eq. (5), in m², px² and rad².
@@ -63,12 +82,16 @@ impl NoiseModel {
             self.sigma_pitch_deg,
             self.sigma_roll_deg,
             self.sigma_yaw_deg,
+            self.position_tau_s,
+            self.position_jitter_m,
+            self.attitude_tau_s,
+            self.attitude_jitter_deg,
         ];
         if all.iter().all(|s| s.is_finite() && *s >= 0.0) {
             Ok(())
         } else {
             Err(EstimatorError::Config(format!(
-                "noise σ's must be finite and >= 0, got {self:?}"
+                "noise σ's and time constants must be finite and >= 0, got {self:?}"
             )))
         }
     }

@@ -8,7 +8,7 @@
 //! service was down (the constant-velocity model and the bias random walk of
 //! `temporal.rs`), so the covariance, hence h_acc, grows with what was lost.
 
-use crate::temporal::{ImageId, TemporalEstimator, CORE, SLOT};
+use crate::temporal::{ImageId, TemporalEstimator, SLOT};
 use crate::{EstimatorConfig, EstimatorError};
 use nalgebra::{DMatrix, DVector, Vector2};
 use shared_types::conventions::Uav;
@@ -69,7 +69,7 @@ impl TemporalEstimator {
                 _ => Err(invalid("a slot names no UAV")),
             })
             .collect::<Result<_, _>>()?;
-        let n = CORE + SLOT * slots.len();
+        let n = filter.core_len() + SLOT * slots.len();
         if let Some(core) = &snapshot.core {
             if core.state.len() != n || core.covariance.len() != n * n {
                 return Err(invalid("dimensions do not match the keyframe slots"));

@@ -20,6 +20,7 @@ use rand::SeedableRng;
 use rand_distr::{Distribution, Normal};
 use shared_types::conventions::wrap_angle;
 use shared_types::messages::PoseSample;
+use shared_types::nav_noise::NavErrorModel;
 
 /// Errors of one method over one scenario (estimate − truth).
 #[derive(Debug, Default, Clone)]
@@ -208,7 +209,20 @@ pub fn estimator_for(config: &SimConfig) -> EstimatorConfig {
         .copied()
         .fold(0.0, f64::max)
         .max(0.05);
-    let model = NoiseModel::isotropic(pos, att, 1.0);
+    let mut model = NoiseModel::isotropic(pos, att, 1.0);
+    // A user states their sensors' error model; the evaluation states the simulator's.
+    if let NavErrorModel::GaussMarkov {
+        position_tau_s,
+        position_jitter_m,
+        attitude_tau_s,
+        attitude_jitter_deg,
+    } = n.model
+    {
+        model.position_tau_s = position_tau_s;
+        model.position_jitter_m = position_jitter_m.max(0.05);
+        model.attitude_tau_s = attitude_tau_s;
+        model.attitude_jitter_deg = attitude_jitter_deg.max(0.05);
+    }
     EstimatorConfig {
         noise_left: model,
         noise_right: model,
