@@ -62,7 +62,7 @@ pub const END_OF_STREAM_EVENT: usize = 1;
 
 /// Small-message services: queue depth per subscriber.
 pub const MESSAGE_SUBSCRIBER_BUFFER: usize = 8;
-pub const MESSAGE_MAX_SUBSCRIBERS: usize = 3;
+pub const MESSAGE_MAX_SUBSCRIBERS: usize = 4;
 
 /// A stage that is woken by its producers.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

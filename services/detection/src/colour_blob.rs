@@ -7,6 +7,7 @@
 //! vehicle's top face); the darker sides would pull the centroid sideways.
 
 use super::{check_bgr, DetectError, Detection, Detector, PartialViewConfig, TrackHint};
+use crate::prediction_gate::{Gate, GateConfig};
 use opencv::core as cv;
 use opencv::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -44,6 +45,9 @@ pub struct ColourBlobConfig {
     /// answer from about a fifth of the pixels; counted as `window_looks` and
     /// `window_misses`).
     pub window_search: bool,
+    /// Gating by the geolocation filter's prediction (`prediction_gate.rs`), applied
+    /// per camera by whoever streams frames and estimates through the detector.
+    pub gate: GateConfig,
 }
 
 impl Default for ColourBlobConfig {
@@ -58,6 +62,7 @@ impl Default for ColourBlobConfig {
             partial_view: PartialViewConfig::default(),
             track_radius_frac: 0.08,
             window_search: true,
+            gate: GateConfig::default(),
         }
     }
 }
@@ -78,6 +83,10 @@ pub struct ColourBlobDetector {
     exposure_retries: u64,
     window_looks: u64,
     window_misses: u64,
+    /// Where the target may be in the next frame: blobs outside are never it.
+    gate: Option<Gate>,
+    /// Blobs of the target's colour the gate excluded in the last whole-frame look.
+    gated_blobs: usize,
 }
 
 impl ColourBlobDetector {
@@ -96,6 +105,7 @@ impl ColourBlobDetector {
             .partial_view
             .validate()
             .map_err(DetectError::Config)?;
+        config.gate.validate().map_err(DetectError::Config)?;
         if !(config.track_radius_frac > 0.0 && config.track_radius_frac <= 1.0) {
             return Err(DetectError::Config(
                 "track_radius_frac must be in (0, 1]".into(),
@@ -119,6 +129,8 @@ impl ColourBlobDetector {
             exposure_retries: 0,
             window_looks: 0,
             window_misses: 0,
+            gate: None,
+            gated_blobs: 0,
         })
     }
 
@@ -131,6 +143,17 @@ impl ColourBlobDetector {
     /// that needed the whole frame after all (since creation).
     pub fn window_counts(&self) -> (u64, u64) {
         (self.window_looks, self.window_misses)
+    }
+
+    /// The gate of the next detections (`None`: everywhere). A blob whose centre is
+    /// outside it is not a candidate at all, not even the only one in the frame.
+    pub fn set_gate(&mut self, gate: Option<Gate>) {
+        self.gate = gate;
+    }
+
+    /// Blobs of the target's colour the gate excluded in the last whole-frame look.
+    pub fn gated_blobs(&self) -> usize {
+        self.gated_blobs
     }
 
     /// Swaps the whole-frame buffers with the window search's.
@@ -173,8 +196,16 @@ impl ColourBlobDetector {
         &mut self,
         value_min: f64,
         near: Option<([f64; 2], f64)>,
-        window: bool,
+        window: Option<[f64; 2]>,
     ) -> Result<Option<(i32, i32)>, DetectError> {
+        // The gate in this buffer's pixels (a window's origin is its top-left).
+        let origin = window.unwrap_or([0.0, 0.0]);
+        let gate = self.gate.map(|g| Gate {
+            centre: [g.centre[0] - origin[0], g.centre[1] - origin[1]],
+            ..g
+        });
+        let window = window.is_some();
+        let mut gated = 0;
         let c = &self.config;
         for (i, [lo, hi]) in c.hue_ranges.iter().enumerate() {
             let low = cv::Scalar::new(*lo as f64, c.saturation_min as f64, value_min, 0.0);
@@ -221,6 +252,16 @@ impl ColourBlobDetector {
             if area < c.min_area_px || area > c.max_area_px {
                 continue;
             }
+            if let Some(g) = gate {
+                let (x, y) = (
+                    *self.centroids.at_2d::<f64>(label, 0)?,
+                    *self.centroids.at_2d::<f64>(label, 1)?,
+                );
+                if !g.contains([x, y]) {
+                    gated += 1;
+                    continue;
+                }
+            }
             candidates += 1;
             only = Some((label, area));
             let score = match near {
@@ -244,6 +285,9 @@ impl ColourBlobDetector {
         // Nothing near the hint, but a single blob of the target's colour in the frame:
         // nothing to confuse it with, so it is the target (the UAVs turning move it
         // farther than the radius in one frame).
+        if !window {
+            self.gated_blobs = gated;
+        }
         if best.is_none() && candidates == 1 && !window {
             return Ok(only);
         }
@@ -266,6 +310,7 @@ impl ColourBlobDetector {
         hint: Option<TrackHint>,
     ) -> Result<Option<Detection>, DetectError> {
         check_bgr(frame)?;
+        self.gated_blobs = 0;
         let near = hint.map(|h| {
             let radius = if h.fresh {
                 let growth = (1.0 + h.age_s / 0.2).min(2.0);
@@ -296,7 +341,10 @@ impl ColourBlobDetector {
                         )
                     })
                     .map_err(DetectError::from)
-                    .and_then(|()| self.pick_blob(value_min, Some((local, radius)), true));
+                    .and_then(|()| {
+                        let origin = [rect.x as f64, rect.y as f64];
+                        self.pick_blob(value_min, Some((local, radius)), Some(origin))
+                    });
                 match look {
                     Ok(Some(found)) => {
                         let detection = self.detection(found, [rect.x as f64, rect.y as f64]);
@@ -316,13 +364,13 @@ impl ColourBlobDetector {
         }
         if best.is_none() {
             opencv::imgproc::cvt_color_def(frame, &mut self.hsv, opencv::imgproc::COLOR_BGR2HSV)?;
-            best = self.pick_blob(value_min, near, false)?;
+            best = self.pick_blob(value_min, near, None)?;
         }
         if best.is_none() && self.config.adapt_to_exposure {
             let exposure = self.bright_percentile()? as f64 / 255.0;
             if exposure < 0.95 {
                 self.exposure_retries += 1;
-                best = self.pick_blob((value_min * exposure).max(1.0), near, false)?;
+                best = self.pick_blob((value_min * exposure).max(1.0), near, None)?;
             }
         }
         let Some(found) = best else {

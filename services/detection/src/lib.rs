@@ -7,6 +7,7 @@
 mod colour_blob;
 pub mod frame_view;
 mod partial_view;
+pub mod prediction_gate;
 mod tracked;
 pub mod yolo;
 

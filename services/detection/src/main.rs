@@ -9,15 +9,23 @@
 //! around the track, and those that then needed the whole frame), `exposure_retries`
 //! (frames looked at again with the exposure-scaled
 //! brightness floor), `partial_view_dropped` (detections of a partly hidden target,
-//! dropped by the per-camera track of [`TrackedDetector`]).
+//! dropped by the per-camera track of [`TrackedDetector`]), `gated_out` (frames where
+//! a blob of the target's colour lay outside the gate of the geolocation filter's
+//! prediction and none inside: a look-alike not taken for the target; the service
+//! subscribes to the estimates for it, `detection::prediction_gate`), `reacquired`
+//! (detections after a camera found nothing in its gates for `reacquire_after_s`),
+//! `gated_frames` (frames detected with a gate).
 
 use anyhow::{Context, Result};
 use clap::Parser;
 use detection::frame_view::frame_mat;
+use detection::prediction_gate::{gate_for, FrameGeometry, RecentPredictions, TargetPrediction};
 use detection::{ColourBlobConfig, TrackedDetector};
 use shared_types::clock::{elapsed_us, monotonic_ns};
+use shared_types::conventions::Intrinsics;
 use shared_types::conventions::Uav;
-use shared_types::messages::DetectionMsg;
+use shared_types::lens::Distortion;
+use shared_types::messages::{DetectionMsg, EstimateMsg};
 use shared_types::service_names::Topic;
 use shared_types::shell::{init_tracing, load_section, serve, SeqGaps, ServiceArgs, StatsSaver};
 use shared_types::stats::StageStats;
@@ -34,6 +42,7 @@ fn main() -> Result<()> {
     let args = Args::parse();
     init_tracing("detection");
     let config: ColourBlobConfig = load_section(args.service.config.as_deref(), "detection")?;
+    let gate_config = config.gate;
     let mut detector = TrackedDetector::new(config).context("detector configuration")?;
     let endpoint = Endpoint::new(&args.service.run_id, "detection")?;
     let frames = [
@@ -41,6 +50,8 @@ fn main() -> Result<()> {
         endpoint.frame_subscriber(Uav::Right)?,
     ];
     let publisher = endpoint.publisher::<DetectionMsg>(Topic::Detections)?;
+    let estimates = endpoint.subscriber::<EstimateMsg>(Topic::Estimates)?;
+    let mut predictions = RecentPredictions::default();
     let wake_matching = endpoint.notifier(Stage::Matching)?;
     let listener = endpoint.listener(Stage::Detection)?;
     let mut stats = StageStats::new("detection");
@@ -55,6 +66,9 @@ fn main() -> Result<()> {
 
     let stop = serve(&listener, |wake| -> Result<bool> {
         let mut first = true;
+        while let Some(e) = estimates.receive().context("receive estimate")? {
+            predictions.push(e.pair_seq, TargetPrediction::from_estimate(e.payload()));
+        }
         for (uav, subscriber) in frames.iter().enumerate() {
             while let Some(sample) = subscriber.receive().context("receive frame")? {
                 let header = *sample.user_header();
@@ -69,7 +83,12 @@ fn main() -> Result<()> {
                 stats.count("frames", 1);
                 stats.count("frames_lost", gaps[uav].see(header.seq));
                 let found = match frame_mat(&header, sample.payload()) {
-                    Ok(mat) => match detector.detect(uav, header.t_s, &mat) {
+                    Ok(mat) => match detector.detect_gated(
+                        uav,
+                        header.t_s,
+                        &mat,
+                        gate_of(&predictions, &header, &gate_config, &mut stats),
+                    ) {
                         Ok(d) => d,
                         Err(e) => {
                             tracing::warn!(seq = header.seq, uav, "detector failed: {e}");
@@ -96,6 +115,8 @@ fn main() -> Result<()> {
                 stats.count("partial_view_dropped", counts.partial_view_dropped);
                 stats.count("window_looks", counts.window_looks);
                 stats.count("window_misses", counts.window_misses);
+                stats.count("gated_out", counts.gated_out);
+                stats.count("reacquired", counts.reacquired);
                 if let Some(d) = found {
                     stats.count("found", 1);
                     msg.found = 1;
@@ -121,4 +142,29 @@ fn main() -> Result<()> {
     let path = saver.finish(&stats)?;
     tracing::info!(?stop, stats = %path.display(), "detection stopped");
     Ok(())
+}
+
+/// The gate of this frame from the estimate [`detection::prediction_gate::ESTIMATE_LAG_PAIRS`]
+/// pairs back, if the filter was tracking then (counted `gated_frames`).
+fn gate_of(
+    predictions: &RecentPredictions,
+    header: &shared_types::messages::FrameHeader,
+    config: &detection::prediction_gate::GateConfig,
+    stats: &mut StageStats,
+) -> Option<detection::prediction_gate::Gate> {
+    let prediction = predictions.for_pair(header.seq)?;
+    let [fx, fy, cx, cy] = header.intrinsics;
+    let frame = FrameGeometry {
+        t_s: header.t_s,
+        uav: header.uav as usize,
+        pose: header.pose,
+        intrinsics: Intrinsics::new(fx, fy, cx, cy),
+        distortion: Distortion(header.distortion),
+        width: header.width,
+    };
+    let gate = gate_for(&prediction, &frame, config);
+    if gate.is_some() {
+        stats.count("gated_frames", 1);
+    }
+    gate
 }

@@ -1,9 +1,14 @@
 //! The colour-blob detector with each camera's track: the one way a stream of frames
 //! is detected (the detection service, the evaluation's vision pass and scene suite).
 //! Per camera, [`PartialViewGuard`] gives the detector its hint and drops a partly
-//! hidden target; what was dropped or retried is counted.
+//! hidden target, and the geolocation filter's prediction (when the caller has one)
+//! gates which blob can be the target (`prediction_gate.rs`); what was dropped,
+//! gated out or retried is counted.
 
-use crate::{ColourBlobConfig, ColourBlobDetector, DetectError, Detection, PartialViewGuard};
+use crate::prediction_gate::{Gate, GateConfig};
+use crate::{
+    ColourBlobConfig, ColourBlobDetector, DetectError, Detection, PartialViewGuard, TrackHint,
+};
 use opencv::core as cv;
 
 /// What [`TrackedDetector`] did beyond detecting, since the last
@@ -18,11 +23,20 @@ pub struct TrackCounts {
     /// needed the whole frame after all.
     pub window_looks: u64,
     pub window_misses: u64,
+    /// Frames with a gate where a blob of the target's colour was outside it and none
+    /// inside (a look-alike not taken for the target).
+    pub gated_out: u64,
+    /// Detections made after a camera found nothing inside its gate for
+    /// `reacquire_after_s`, looking everywhere again.
+    pub reacquired: u64,
 }
 
 pub struct TrackedDetector {
     detector: ColourBlobDetector,
     guards: [PartialViewGuard; 2],
+    gate_config: GateConfig,
+    /// Per camera: when it last found the target (inside its gate, if it had one).
+    last_found: [Option<f64>; 2],
     counts: TrackCounts,
     retries_seen: u64,
     windows_seen: (u64, u64),
@@ -32,6 +46,8 @@ impl TrackedDetector {
     pub fn new(config: ColourBlobConfig) -> Result<Self, DetectError> {
         let guard = PartialViewGuard::new(config.partial_view);
         Ok(Self {
+            gate_config: config.gate,
+            last_found: [None; 2],
             detector: ColourBlobDetector::new(config)?,
             guards: [guard; 2],
             counts: TrackCounts::default(),
@@ -48,11 +64,48 @@ impl TrackedDetector {
         t_s: f64,
         frame: &cv::Mat,
     ) -> Result<Option<Detection>, DetectError> {
+        self.detect_gated(camera, t_s, frame, None)
+    }
+
+    /// [`Self::detect`] inside `gate` (the filter's prediction in this frame): a blob
+    /// outside it is never the target. A camera that has found nothing inside its
+    /// gates for `reacquire_after_s` looks everywhere again (counted `reacquired`).
+    pub fn detect_gated(
+        &mut self,
+        camera: usize,
+        t_s: f64,
+        frame: &cv::Mat,
+        gate: Option<Gate>,
+    ) -> Result<Option<Detection>, DetectError> {
         let guard = self
             .guards
             .get_mut(camera)
             .ok_or_else(|| DetectError::Config(format!("camera {camera} is not 0 or 1")))?;
-        let found = self.detector.detect_near(frame, guard.hint(t_s));
+        let lost =
+            self.last_found[camera].is_some_and(|t| t_s - t > self.gate_config.reacquire_after_s);
+        let gate = gate.filter(|_| self.gate_config.enabled && !lost);
+        let reacquiring = lost && gate.is_none();
+        // The image track refines the gate: its hint stands when it lies inside the
+        // gate; otherwise the blob nearest the predicted pixel (inside the gate) wins.
+        let hint = match (guard.hint(t_s), gate) {
+            (Some(h), Some(g)) if !g.contains(h.centre) => Some(TrackHint {
+                centre: g.centre,
+                fresh: false,
+                age_s: h.age_s,
+            }),
+            (None, Some(g)) => Some(TrackHint {
+                centre: g.centre,
+                fresh: false,
+                age_s: 0.0,
+            }),
+            (h, _) => h,
+        };
+        self.detector.set_gate(gate);
+        let found = self.detector.detect_near(frame, hint);
+        self.detector.set_gate(None);
+        if matches!(found, Ok(None)) && gate.is_some() && self.detector.gated_blobs() > 0 {
+            self.counts.gated_out += 1;
+        }
         let retries = self.detector.exposure_retries();
         self.counts.exposure_retries += retries - self.retries_seen;
         self.retries_seen = retries;
@@ -64,6 +117,10 @@ impl TrackedDetector {
             return Ok(None);
         };
         if guard.accept(t_s, &detection) {
+            self.last_found[camera] = Some(t_s);
+            if reacquiring {
+                self.counts.reacquired += 1;
+            }
             Ok(Some(detection))
         } else {
             self.counts.partial_view_dropped += 1;

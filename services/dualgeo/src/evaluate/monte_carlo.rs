@@ -31,7 +31,7 @@ pub const WARM_UP_S: f64 = 10.0;
 
 /// Bumped when the code changes what a run gives for the same inputs, so cached runs
 /// of an older build are not reused.
-const RUN_FORMAT: u32 = 3;
+const RUN_FORMAT: u32 = 4;
 
 /// The navigation-error models the Monte Carlo runs under.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize, clap::ValueEnum)]
@@ -121,14 +121,19 @@ pub fn run_one(config: SimConfig, every: u64, matching: &MatchingConfig) -> Resu
     };
     while let Some(pair) = scene.next_pair()? {
         let step = lane.step(&pair)?;
-        let frame = &pair.step.frames[0];
-        let counted = frame.t_s >= WARM_UP_S;
+        let (t_s, seq, target, visible) = {
+            let f = &pair.step.frames[0];
+            (f.t_s, f.seq, f.target, pair.visible)
+        };
+        let counted = t_s >= WARM_UP_S;
         let estimate = match step.default {
             Some(Ok(e)) => Some(e),
             _ => None,
         };
+        // As in `run`, the estimate gates later pairs' detections.
+        scene.observe_estimate(seq, t_s, estimate.as_ref());
         if counted {
-            if pair.visible {
+            if visible {
                 record.visible_after_warm_up += 1;
                 record.located_after_warm_up += estimate.is_some() as usize;
             } else {
@@ -136,20 +141,16 @@ pub fn run_one(config: SimConfig, every: u64, matching: &MatchingConfig) -> Resu
             }
         }
         let Some(e) = estimate else { continue };
-        let bias = config.bias.at(frame.t_s);
+        let bias = config.bias.at(t_s);
         let p = e.estimate.position;
         let c = e.estimate.covariance;
         record.estimates.push(EstimateRow {
-            t_s: frame.t_s,
-            err: [
-                p.x - frame.target[0],
-                p.y - frame.target[1],
-                p.z - frame.target[2],
-            ],
+            t_s,
+            err: [p.x - target[0], p.y - target[1], p.z - target[2]],
             cov_xy: [c[(0, 0)], c[(0, 1)], c[(1, 1)]],
             v_acc: e.estimate.altitude_std_error_m,
             bias_err_deg: [0, 1].map(|i| wrap_angle(e.estimate.yaw_bias[i] - bias[i]).to_degrees()),
-            visible: pair.visible,
+            visible,
             quality: e.quality as u8,
         });
     }

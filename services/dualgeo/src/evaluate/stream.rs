@@ -1,12 +1,14 @@
 //! A simulated scene streamed through the whole chain in one process, as the scene suite
 //! and the Monte Carlo evaluation need it: the simulator renders each pair, the colour
-//! detector (with its track) finds the target, and each [`Lane`] runs its own vision
-//! chain and estimators on the same pixels. Truth comes along for scoring only; nothing
+//! detector (with its track, gated by the default estimator's prediction as in `run`:
+//! [`SceneStream::observe_estimate`]) finds the target, and each [`Lane`] runs its own
+//! vision chain and estimators on the same pixels. Truth comes along for scoring only; nothing
 //! here gives it to the chain or the estimators.
 
 use acquisition::sim::{SimConfig, SimStep, Simulator};
 use anyhow::Result;
-use detection::{ColourBlobConfig, TrackedDetector};
+use detection::prediction_gate::{self, GateConfig, RecentPredictions, TargetPrediction};
+use detection::{ColourBlobConfig, TrackCounts, TrackedDetector};
 use geolocation::{
     estimate_set, geolocate_filtered, EstimatorConfig, EstimatorError, EstimatorMethod,
     FilteredEstimate, ImageId, Observation, SetEstimate, TemporalEstimator,
@@ -42,6 +44,10 @@ pub struct Pair<'a> {
 pub struct SceneStream {
     sim: Simulator,
     detector: TrackedDetector,
+    gate: GateConfig,
+    predictions: RecentPredictions,
+    /// What the detector counted (gated out, re-acquired, ...) over the stream.
+    pub detector_counts: TrackCounts,
     images: [cv::Mat; 2],
     every: u64,
     k: u64,
@@ -63,10 +69,38 @@ impl SceneStream {
             },
             sim,
             detector: TrackedDetector::new(ColourBlobConfig::default())?,
+            gate: ColourBlobConfig::default().gate,
+            predictions: RecentPredictions::default(),
+            detector_counts: TrackCounts::default(),
             images: [blank()?, blank()?],
             every: every.max(1),
             k: 0,
         })
+    }
+
+    /// What the default estimator made of pair `pair_seq` (the frames' `seq`): later
+    /// pairs' detections are gated by it, with the detection service's lag
+    /// ([`prediction_gate::ESTIMATE_LAG_PAIRS`]).
+    pub fn observe_estimate(&mut self, pair_seq: u64, t_s: f64, estimate: Option<&SetEstimate>) {
+        let prediction = estimate.and_then(|e| {
+            let p = TargetPrediction {
+                t_s,
+                position: e.estimate.position.coords.into(),
+                velocity: e.velocity?,
+                horizontal_variance_m2: e.estimate.covariance[(0, 0)]
+                    + e.estimate.covariance[(1, 1)],
+                velocity_std_mps: e
+                    .velocity_std_mps?
+                    .iter()
+                    .map(|v| v * v)
+                    .sum::<f64>()
+                    .sqrt(),
+                yaw_bias: e.estimate.yaw_bias,
+            };
+            let tracking = e.quality == geolocation::Quality::Tracking;
+            (tracking && p.is_finite()).then_some(p)
+        });
+        self.predictions.push(pair_seq, prediction);
     }
 
     /// Pairs this stream will give.
@@ -93,11 +127,28 @@ impl SceneStream {
         }
         let mut detections = [None, None];
         for (i, d) in detections.iter_mut().enumerate() {
+            let f = &step.frames[i];
+            let gate = self.predictions.for_pair(f.seq).and_then(|p| {
+                let frame = prediction_gate::FrameGeometry {
+                    t_s: f.t_s,
+                    uav: i,
+                    pose: f.measured,
+                    intrinsics: self.geometry.intrinsics,
+                    distortion: self.geometry.lens,
+                    width: self.geometry.width,
+                };
+                prediction_gate::gate_for(&p, &frame, &self.gate)
+            });
             *d = self
                 .detector
-                .detect(i, step.frames[i].t_s, &self.images[i])?
+                .detect_gated(i, f.t_s, &self.images[i], gate)?
                 .map(|d| d.centre);
         }
+        let c = self.detector.take_counts();
+        let total = &mut self.detector_counts;
+        total.gated_out += c.gated_out;
+        total.reacquired += c.reacquired;
+        total.partial_view_dropped += c.partial_view_dropped;
         let visible = [Uav::Left, Uav::Right]
             .iter()
             .all(|&uav| self.sim.target_visible(&step, uav));
