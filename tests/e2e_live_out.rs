@@ -249,6 +249,7 @@ fn the_mcap_recording_is_read_back_by_the_mcap_reader() {
         ("/target/fix", "foxglove.LocationFix"),
         ("/target/pose", "foxglove.PoseInFrame"),
         ("/latency", "dualgeo.StageLatency"),
+        ("/target/quality", "dualgeo.TargetQuality"),
     ];
     let channels = report["channels"].as_object().expect("channels");
     assert_eq!(channels.len(), expected.len(), "{channels:?}");
@@ -303,5 +304,14 @@ fn the_mcap_recording_is_read_back_by_the_mcap_reader() {
         }
     }
     assert!(n("/latency") >= n("/target/fix"));
+    // Every estimate says how far it can be trusted (issue #23).
+    assert_eq!(n("/target/quality"), n("/target/pose"));
+    let qualities = report["qualities"].as_object().expect("qualities");
+    assert!(
+        qualities
+            .keys()
+            .all(|q| ["converging", "tracking", "coasting"].contains(&q.as_str())),
+        "{qualities:?}"
+    );
     assert!(report["latency_sum_error_ms"].as_f64().unwrap() < 1e-3);
 }

@@ -6,6 +6,7 @@ prints one JSON document of what it found, for tests/e2e_live_out.rs:
  "bad_json": n,        # messages whose data is not a JSON object
  "bad_images": n,      # CompressedImage data that is not base64 of a JPEG
  "fixes": [[lat, lon, alt], ...],   # /target/fix in file order
+ "qualities": {state: n},           # /target/quality by quality state
  "latency_sum_error_ms": x}   # max |sum of stage latencies - end_to_end| where all known
 
 Usage: read_mcap.py FILE
@@ -19,7 +20,7 @@ from mcap.reader import make_reader
 
 
 def main(path):
-    out = {"channels": {}, "bad_json": 0, "bad_images": 0, "fixes": [],
+    out = {"channels": {}, "bad_json": 0, "bad_images": 0, "fixes": [], "qualities": {},
            "latency_sum_error_ms": 0.0}
     with open(path, "rb") as f:
         reader = make_reader(f)
@@ -51,6 +52,9 @@ def main(path):
                 out["bad_images"] += 0 if ok else 1
             elif channel.topic == "/target/fix":
                 out["fixes"].append([data["latitude"], data["longitude"], data["altitude"]])
+            elif channel.topic == "/target/quality":
+                q = data["quality"]
+                out["qualities"][q] = out["qualities"].get(q, 0) + 1
             elif channel.topic == "/latency":
                 parts = [data[k] for k in ("acquisition_ms", "detection_ms",
                                            "matching_ms", "geolocation_ms")]

@@ -113,6 +113,22 @@ pub fn fix_message(time: &Value, fix: &TargetFix, e: &EstimateMsg) -> Value {
     })
 }
 
+/// dualgeo.TargetQuality of a valid estimate: its quality state (issue #23) and the
+/// accuracy it states.
+pub fn quality_message(time: &Value, e: &EstimateMsg) -> Value {
+    let quality = geolocation::Quality::from_index(e.quality).map_or("converging", |q| q.name());
+    let h_acc = (e.covariance[0] + e.covariance[5]).max(0.0).sqrt();
+    json!({
+        "timestamp": time,
+        "pair_seq": e.pair_seq,
+        "quality": quality,
+        "h_acc_m": finite_or_null(h_acc),
+        "v_acc_m": finite_or_null(e.altitude_std_error_m),
+        "yaw_bias_left_deg": finite_or_null(e.yaw_bias_deg[0]),
+        "yaw_bias_right_deg": finite_or_null(e.yaw_bias_deg[1]),
+    })
+}
+
 /// foxglove.PoseInFrame of a valid estimate's ENU position (no orientation is
 /// estimated: identity).
 pub fn target_pose_message(time: &Value, e: &EstimateMsg) -> Value {
@@ -282,6 +298,28 @@ mod tests {
         assert_eq!(m["latitude"], 30.0);
         e.altitude_std_error_m = f64::NAN;
         assert!(fix_message(&time(), &fix, &e)["position_covariance"][8].is_null());
+    }
+
+    #[test]
+    fn the_quality_message_names_the_state_and_the_stated_accuracy() {
+        let mut e = EstimateMsg {
+            pair_seq: 7,
+            altitude_std_error_m: 0.8,
+            quality: 1,
+            yaw_bias_deg: [2.0, -3.0],
+            ..Default::default()
+        };
+        e.covariance[0] = 0.09;
+        e.covariance[5] = 0.16;
+        let m = quality_message(&time(), &e);
+        assert_eq!(m["quality"], "tracking");
+        assert!((m["h_acc_m"].as_f64().unwrap() - 0.5).abs() < 1e-12);
+        assert_eq!(m["v_acc_m"], 0.8);
+        assert_eq!(m["yaw_bias_right_deg"], -3.0);
+        e.quality = 0;
+        assert_eq!(quality_message(&time(), &e)["quality"], "converging");
+        e.altitude_std_error_m = f64::NAN;
+        assert!(quality_message(&time(), &e)["v_acc_m"].is_null());
     }
 
     #[test]

@@ -210,6 +210,8 @@ impl Recorder {
             }
             let m = encode::target_pose_message(&time, e);
             self.write(Channel::TargetPose, log_ns, e.published_ns, &m);
+            let m = encode::quality_message(&time, e);
+            self.write(Channel::TargetQuality, log_ns, e.published_ns, &m);
         }
         let m = encode::latency_message(&time, e, &times);
         self.write(Channel::Latency, log_ns, e.published_ns, &m);

@@ -2,7 +2,8 @@
 //! (https://docs.foxglove.dev/docs/visualization/message-schemas) in their JSON Schema
 //! form, messages JSON-encoded (`bytes` fields as base64, as Foxglove's JSON encoding
 //! defines). Only the fields dualgeo fills are spelled out; the titles are what Foxglove
-//! matches a panel on. Stage latency has no well-known schema: `dualgeo.StageLatency`.
+//! matches a panel on. Stage latency and the estimate's quality have no well-known
+//! schema: `dualgeo.StageLatency`, `dualgeo.TargetQuality`.
 
 /// Schema encoding of every schema here (MCAP's well-known `jsonschema`).
 pub const SCHEMA_ENCODING: &str = "jsonschema";
@@ -19,8 +20,9 @@ pub struct ChannelSpec {
 /// What the recorder writes, in channel-id order. Per UAV: the frame as a JPEG, the
 /// measured camera pose in the world ENU frame, the detection drawn on the image. Then
 /// the target (a geodetic fix with covariance, and its ENU position) and the latency of
-/// each stage for that estimate.
-pub const CHANNELS: [ChannelSpec; 9] = [
+/// each stage for that estimate, then how far the estimate can be trusted (its
+/// quality state, h_acc, v_acc and both yaw biases).
+pub const CHANNELS: [ChannelSpec; 10] = [
     ChannelSpec {
         topic: "/left/image",
         schema: "foxglove.CompressedImage",
@@ -57,6 +59,10 @@ pub const CHANNELS: [ChannelSpec; 9] = [
         topic: "/latency",
         schema: "dualgeo.StageLatency",
     },
+    ChannelSpec {
+        topic: "/target/quality",
+        schema: "dualgeo.TargetQuality",
+    },
 ];
 
 /// Index into [`CHANNELS`].
@@ -68,6 +74,7 @@ pub enum Channel {
     TargetFix,
     TargetPose,
     Latency,
+    TargetQuality,
 }
 
 impl Channel {
@@ -79,6 +86,7 @@ impl Channel {
             Channel::TargetFix => 6,
             Channel::TargetPose => 7,
             Channel::Latency => 8,
+            Channel::TargetQuality => 9,
         }
     }
 }
@@ -209,6 +217,22 @@ pub fn schema_text(name: &str) -> Option<String> {
                 &["timestamp", "pair_seq", "status", "end_to_end_ms"],
             )
         }
+        "dualgeo.TargetQuality" => object(
+            name,
+            &[
+                ("timestamp", TIME.into()),
+                ("pair_seq", s("integer")),
+                (
+                    "quality",
+                    r#"{"type":"string","enum":["converging","tracking","coasting"]}"#.into(),
+                ),
+                ("h_acc_m", s("number")),
+                ("v_acc_m", s("number")),
+                ("yaw_bias_left_deg", s("number")),
+                ("yaw_bias_right_deg", s("number")),
+            ],
+            &["timestamp", "pair_seq", "quality", "h_acc_m", "v_acc_m"],
+        ),
         _ => return None,
     };
     Some(text)
