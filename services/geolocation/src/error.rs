@@ -40,6 +40,8 @@ pub enum EstimatorError {
         "only {estimated} past image(s) for the consistency filter to compare; {required} needed"
     )]
     TooFewPastImagesToCompare { estimated: usize, required: usize },
+    #[error("the temporal filter has not started: {reason}")]
+    NotStarted { reason: &'static str },
     #[error("invalid estimator configuration: {0}")]
     Config(String),
 }
@@ -58,6 +60,7 @@ impl EstimatorError {
             EstimatorError::NonFiniteResult { .. } => "non_finite_result",
             EstimatorError::InconsistentPastImages { .. } => "inconsistent_past_images",
             EstimatorError::TooFewPastImagesToCompare { .. } => "too_few_past_images_to_compare",
+            EstimatorError::NotStarted { .. } => "not_started",
             EstimatorError::Config(_) => "config",
         }
     }

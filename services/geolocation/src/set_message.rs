@@ -214,9 +214,22 @@ mod tests {
             assert_eq!(msg.status, EstimateStatus::BadInput as u32);
         }
         assert_eq!(stats.counter("bad_input"), 3);
-        // The filter was not touched: a good set still estimates.
+        // The filter was not touched: good sets start it (three agreeing window
+        // estimates; the first two are refused and counted) and it estimates.
+        for t in [10.3, 10.4] {
+            let msg = estimate_message(&set_at(t), &config, Some(&mut temporal), &mut stats);
+            assert_eq!(msg.status, EstimateStatus::Rejected as u32);
+        }
+        assert_eq!(stats.counter("rejected.not_started"), 2);
         let msg = estimate_message(&set_at(10.5), &config, Some(&mut temporal), &mut stats);
         assert_eq!(msg.status, EstimateStatus::Ok as u32);
+    }
+
+    /// Feeds the sets that start the filter (it needs three agreeing ones).
+    fn start(temporal: &mut TemporalEstimator, config: &EstimatorConfig, stats: &mut StageStats) {
+        for t in [9.8, 9.9] {
+            estimate_message(&set_at(t), config, Some(temporal), stats);
+        }
     }
 
     #[test]
@@ -225,6 +238,7 @@ mod tests {
         let mut temporal = TemporalEstimator::new(config).unwrap();
         let mut stats = StageStats::new("t");
         // The first estimate of the filter is converging: its h_acc is large.
+        start(&mut temporal, &config, &mut stats);
         let open = estimate_message(&set_at(10.0), &config, Some(&mut temporal), &mut stats);
         assert_eq!(open.status, EstimateStatus::Ok as u32);
         assert_eq!(open.quality, crate::Quality::Converging as u64);
@@ -233,6 +247,7 @@ mod tests {
             ..config
         };
         let mut temporal = TemporalEstimator::new(strict).unwrap();
+        start(&mut temporal, &strict, &mut stats);
         let msg = estimate_message(&set_at(10.0), &strict, Some(&mut temporal), &mut stats);
         assert_eq!(msg.status, EstimateStatus::Withheld as u32);
         assert_eq!(stats.counter("withheld.h_acc"), 1);

@@ -184,7 +184,14 @@ pub struct TemporalEstimator {
     pub(crate) drift: [nalgebra::Vector2<f64>; 2],
     /// Geolocations since the last re-opening.
     pub(crate) since_reopen: usize,
+    /// Before the start: the last plausible window estimates (t, position).
+    pub(crate) start_candidates: Vec<(f64, Point3<f64>)>,
 }
+
+/// Window estimates that must agree before the filter starts.
+const START_CONSENSUS: usize = 3;
+/// How far a target can drive between two of them, m/s (the agreement's allowance).
+const START_MAX_SPEED_MPS: f64 = 20.0;
 
 /// Core states: x, y, z, v_x, v_y, δψ_L, δψ_R ...
 const CORE: usize = 7;
@@ -250,6 +257,7 @@ impl TemporalEstimator {
             slots: Vec::new(),
             drift: [nalgebra::Vector2::zeros(); 2],
             since_reopen: REOPEN_HOLD,
+            start_candidates: Vec::new(),
         })
     }
 
@@ -259,6 +267,58 @@ impl TemporalEstimator {
         self.slots.clear();
         self.drift = [nalgebra::Vector2::zeros(); 2];
         self.since_reopen = REOPEN_HOLD;
+        self.start_candidates.clear();
+    }
+
+    /// Whether the filter may start from `window` at `t_s`: the window estimate must be
+    /// plausible (below both current cameras, both biases within twice the start's
+    /// σ, at least 45°) and agree with the previous [`START_CONSENSUS`] − 1 plausible ones (within
+    /// twice the start's position σ plus what a target can drive in between). One
+    /// set that pairs the target in one camera with a look-alike in the other gives a
+    /// window estimate hundreds of metres off (`suite_traffic`); the filter started
+    /// there with σ 15 m and never came back.
+    fn agree_on_start(
+        &mut self,
+        t_s: f64,
+        current: [&Observation; 2],
+        window: &Estimate,
+    ) -> Result<(), EstimatorError> {
+        let tc = self.config.temporal;
+        let p = window.position;
+        let bias_limit = (2.0 * tc.initial_bias_sigma_deg).max(45.0).to_radians();
+        let plausible = p.iter().all(|v| v.is_finite())
+            && window.yaw_bias.iter().all(|b| b.abs() <= bias_limit)
+            && current.iter().all(|o| p.z < o.position.z);
+        if !plausible {
+            return Err(EstimatorError::NotStarted {
+                reason: "implausible window estimate",
+            });
+        }
+        self.start_candidates.push((t_s, p));
+        if self.start_candidates.len() > START_CONSENSUS {
+            self.start_candidates.remove(0);
+        }
+        let tolerance =
+            |dt: f64| 2.0 * tc.initial_position_sigma_m + START_MAX_SPEED_MPS * dt.abs();
+        let agree = self.start_candidates.iter().all(|(ti, pi)| {
+            self.start_candidates
+                .iter()
+                .all(|(tj, pj)| (pi - pj).norm() <= tolerance(ti - tj))
+        });
+        match (self.start_candidates.len() == START_CONSENSUS, agree) {
+            (true, true) => Ok(()),
+            (_, false) => {
+                // Keep the newest: the others disagree with it or with each other.
+                self.start_candidates
+                    .drain(..self.start_candidates.len() - 1);
+                Err(EstimatorError::NotStarted {
+                    reason: "window estimates disagree",
+                })
+            }
+            (false, true) => Err(EstimatorError::NotStarted {
+                reason: "waiting for agreeing window estimates",
+            }),
+        }
     }
 
     /// σ's of the white part of one image's pose error (x, y, z, yaw, pitch, roll):
@@ -397,12 +457,14 @@ impl TemporalEstimator {
         let (t0, mut s, mut p) = match self.state.take() {
             Some(x) => x,
             None => {
-                // Start from the window estimate (never from truth).
+                // Start from the window estimate (never from truth), once several agree.
                 let w = window.ok_or(EstimatorError::TooFewImages {
                     needed: 3,
                     left: 1,
                     right: 1,
                 })?;
+                self.agree_on_start(t_s, current, w)?;
+                self.start_candidates.clear();
                 self.slots.clear();
                 let mut s = DVector::zeros(self.core_len());
                 s[0] = w.position.x;
@@ -866,6 +928,42 @@ mod tests {
         );
     }
 
+    /// Issue #23: a first set that pairs the target with a look-alike gives a window
+    /// estimate far off; the filter does not start there, and starts once three
+    /// window estimates agree.
+    #[test]
+    fn the_filter_starts_only_from_agreeing_window_estimates() {
+        let scenario = SyntheticScenario::default();
+        let mut rng = rand::rngs::StdRng::seed_from_u64(4);
+        let mut f = TemporalEstimator::new(EstimatorConfig::default()).unwrap();
+        let trial = |t: f64, rng: &mut rand::rngs::StdRng| scenario.trial(t, 4, rng).unwrap();
+        let mut tr = trial(5.0, &mut rng);
+        let o = tr.observations.clone();
+        let mut window = crate::geolocate(&o, &EstimatorConfig::default()).unwrap();
+        // Implausible: a target above the cameras.
+        window.position.z = o[0].position.z + 10.0;
+        let e = f.update(5.0, [&o[0], &o[1]], &[], Some(&window));
+        assert!(matches!(e, Err(EstimatorError::NotStarted { .. })), "{e:?}");
+        // A wrong (mismatched) window 200 m off, then good ones: no start until three
+        // good ones agree, and the start is near the target.
+        window.position = tr.target + nalgebra::Vector3::new(200.0, 0.0, -300.0);
+        assert!(f.update(5.1, [&o[0], &o[1]], &[], Some(&window)).is_err());
+        let mut started = None;
+        for k in 0..4 {
+            let t = 5.2 + 0.1 * k as f64;
+            tr = trial(t, &mut rng);
+            let o = &tr.observations;
+            let w = crate::geolocate(o, &EstimatorConfig::default()).unwrap();
+            if let Ok(e) = f.update(t, [&o[0], &o[1]], &[], Some(&w)) {
+                started = Some((k, e));
+                break;
+            }
+        }
+        let (k, e) = started.expect("started");
+        assert_eq!(k, 2, "the third agreeing window starts it");
+        assert!((e.estimate.position - tr.target).norm() < 30.0);
+    }
+
     #[test]
     fn biases_converge_over_time_on_noisy_data() {
         let scenario = SyntheticScenario::default();
@@ -992,7 +1090,12 @@ mod tests {
             f.update(10.0, [&o[0], &o[1]], &[], None).is_err(),
             "cannot start without a window estimate"
         );
-        f.update(10.0, [&o[0], &o[1]], &[], Some(&window)).unwrap();
+        // It starts once three window estimates agree.
+        for t in [10.0, 10.1] {
+            let e = f.update(t, [&o[0], &o[1]], &[], Some(&window));
+            assert!(matches!(e, Err(EstimatorError::NotStarted { .. })), "{e:?}");
+        }
+        f.update(10.2, [&o[0], &o[1]], &[], Some(&window)).unwrap();
         assert!(f.update(f64::NAN, [&o[0], &o[1]], &[], None).is_err());
         // Earlier time: a new stream; without a window estimate it cannot restart.
         assert!(f.update(5.0, [&o[0], &o[1]], &[], None).is_err());
