@@ -57,8 +57,9 @@ fn quick_evaluation_writes_every_table_and_figure() {
 }
 
 /// Issue #23: the Monte Carlo smoke run (two seeds of a short `default` scene under
-/// both navigation-error models) writes its table, JSON and plots, and a second call
-/// resumes from the kept runs instead of flying them again; flown again, they repeat.
+/// both navigation-error models, and through H.264 at crf 28) writes its tables, JSON
+/// and plots, and a second call resumes from the kept runs instead of flying them
+/// again; flown again, they repeat (x264 and its decoder included).
 #[test]
 fn monte_carlo_smoke_run_writes_its_report_and_resumes() {
     let dir = Scratch::new("mc");
@@ -88,11 +89,22 @@ fn monte_carlo_smoke_run_writes_its_report_and_resumes() {
     assert!(md.contains("### white navigation errors"));
     assert!(md.contains("### correlated navigation errors"));
     assert_eq!(md.matches("| `default` | 2 |").count(), 2, "{md}");
+    // Item 5: the same seeds through H.264 at crf 28 (--quick's one crf).
+    assert!(md.contains("### H.264 video link"), "{md}");
+    let link_row = md
+        .lines()
+        .find(|l| l.starts_with("| H.264 crf 28 | 2 |"))
+        .unwrap_or_else(|| panic!("no crf 28 row: {md}"));
+    assert!(
+        !link_row.contains("NaN") && !link_row.contains("inf"),
+        "{link_row}"
+    );
     let json: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("monte-carlo.json")).unwrap())
             .unwrap();
     let scenes = json["scenes"].as_array().unwrap();
-    assert_eq!(scenes.len(), 2);
+    assert_eq!(scenes.len(), 3);
+    assert_eq!(scenes.iter().filter(|s| s["crf"] == 28).count(), 1);
     for s in scenes {
         let summary = &s["summary"];
         assert_eq!(summary["runs"], 2);
@@ -117,7 +129,7 @@ fn monte_carlo_smoke_run_writes_its_report_and_resumes() {
         );
     }
     let runs = out.join("monte-carlo/runs");
-    assert_eq!(std::fs::read_dir(&runs).unwrap().count(), 4);
+    assert_eq!(std::fs::read_dir(&runs).unwrap().count(), 6);
     // Resumed: the kept runs are read back, so every table row is the same (the JSON's
     // last binary digit may move: serde_json's float parsing is not exact round-trip).
     let rows = || -> Vec<String> {

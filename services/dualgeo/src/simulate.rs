@@ -27,6 +27,11 @@ pub struct SimulateArgs {
     /// `lossless` (FFV1 in MKV, to measure the flight path without compression).
     #[arg(long, default_value = "h264", value_parser = ["h264", "lossless"])]
     flight_video: String,
+    /// Encode the flight's H.264 at this crf (0–51; 18 near-transparent, 28 a thin
+    /// link) through FFmpeg's command-line tool instead of OpenCV's writer, whose H.264
+    /// is always x264's default (crf 23).
+    #[arg(long, requires = "flight_out", value_parser = clap::value_parser!(u8).range(0..=51))]
+    crf: Option<u8>,
     /// Write the recording's images as JPEG of this quality (1–100) instead of PNG:
     /// several times faster to decode on replay (docs/pipeline.md measures both).
     #[arg(long, value_parser = clap::value_parser!(u8).range(1..=100), conflicts_with = "flight_out")]
@@ -83,9 +88,15 @@ pub fn run(args: &SimulateArgs) -> Result<()> {
     };
     let (out, summary) = match (&args.out, &args.flight_out) {
         (_, Some(dir)) => {
-            let codec = match args.flight_video.as_str() {
-                "lossless" => VideoCodec::Lossless,
-                _ => VideoCodec::H264,
+            let codec = match (args.flight_video.as_str(), args.crf) {
+                ("lossless", Some(_)) => {
+                    anyhow::bail!(
+                        "--crf sets H.264's quality: it does not go with --flight-video lossless"
+                    )
+                }
+                ("lossless", None) => VideoCodec::Lossless,
+                (_, Some(crf)) => VideoCodec::H264Crf(crf),
+                (_, None) => VideoCodec::H264,
             };
             let (summary, codec) =
                 record_flight(&mut sim, &args.scenario.preset, dir, codec, progress)

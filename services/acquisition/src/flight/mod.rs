@@ -15,6 +15,7 @@ pub mod source;
 pub mod tlog;
 pub mod video;
 pub mod writer;
+pub mod x264;
 
 pub use live_source::LiveFlightSource;
 

@@ -8,6 +8,8 @@ use opencv::core as cv;
 use opencv::prelude::*;
 use opencv::videoio;
 
+use super::x264::X264Writer;
+
 /// A video file or stream, decoded frame by frame.
 pub struct VideoReader {
     cap: videoio::VideoCapture,
@@ -123,12 +125,15 @@ pub enum VideoCodec {
     /// other), falling back to MPEG-4 part 2 when there is no H.264 encoder: what a
     /// UAV's video link delivers.
     H264,
+    /// H.264 in MP4 at this crf (0–51), through FFmpeg's command-line tool
+    /// ([`super::x264`]): a video link of a chosen quality.
+    H264Crf(u8),
     /// FFV1 in Matroska: lossless, to measure the flight path without compression.
     Lossless,
 }
 
 impl VideoCodec {
-    /// (name, FourCC, file extension), in order of preference.
+    /// (name, FourCC, file extension) for OpenCV's writer, in order of preference.
     fn candidates(self) -> &'static [(&'static str, [char; 4], &'static str)] {
         match self {
             VideoCodec::H264 => &[
@@ -136,16 +141,30 @@ impl VideoCodec {
                 ("mpeg4", ['m', 'p', '4', 'v'], "mp4"),
             ],
             VideoCodec::Lossless => &[("ffv1", ['F', 'F', 'V', '1'], "mkv")],
+            VideoCodec::H264Crf(_) => &[],
         }
     }
 }
 
+/// Who encodes a [`VideoSink`]'s frames.
+enum Encoder {
+    OpenCv(videoio::VideoWriter),
+    Ffmpeg(X264Writer),
+}
+
 /// Writes a video file in the first encoding of a [`VideoCodec`] that OpenCV's FFmpeg
-/// has; [`VideoSink::codec`] says which, [`VideoSink::file_name`] where.
+/// has (or FFmpeg's CLI for [`VideoCodec::H264Crf`]); [`VideoSink::codec`] says which,
+/// [`VideoSink::file_name`] where.
 pub struct VideoSink {
-    writer: videoio::VideoWriter,
+    encoder: Encoder,
     pub codec: &'static str,
     pub file_name: String,
+}
+
+fn file_name_of(path: &std::path::Path) -> String {
+    path.file_name()
+        .map(|n| n.to_string_lossy().to_string())
+        .unwrap_or_default()
 }
 
 impl VideoSink {
@@ -157,6 +176,15 @@ impl VideoSink {
         height: u32,
         frame_rate_hz: f64,
     ) -> Result<Self, String> {
+        if let VideoCodec::H264Crf(crf) = codec {
+            let path = stem.with_extension("mp4");
+            let writer = X264Writer::create(&path, width, height, frame_rate_hz, crf)?;
+            return Ok(Self {
+                encoder: Encoder::Ffmpeg(writer),
+                codec: "h264 (libx264 through ffmpeg)",
+                file_name: file_name_of(&path),
+            });
+        }
         let size = cv::Size::new(width as i32, height as i32);
         let mut name = stem.to_string_lossy().to_string();
         for &(codec, fourcc, ext) in codec.candidates() {
@@ -174,14 +202,10 @@ impl VideoSink {
             )
             .map_err(|e| err(&name, e.message))?;
             if writer.is_opened().unwrap_or(false) {
-                let file_name = path
-                    .file_name()
-                    .map(|n| n.to_string_lossy().to_string())
-                    .unwrap_or_default();
                 return Ok(Self {
-                    writer,
+                    encoder: Encoder::OpenCv(writer),
                     codec,
-                    file_name,
+                    file_name: file_name_of(&path),
                 });
             }
         }
@@ -189,11 +213,26 @@ impl VideoSink {
     }
 
     pub fn write(&mut self, frame: &cv::Mat) -> Result<(), String> {
-        self.writer.write(frame).map_err(|e| e.message)
+        match &mut self.encoder {
+            Encoder::OpenCv(w) => w.write(frame).map_err(|e| e.message),
+            Encoder::Ffmpeg(w) => {
+                if frame.typ() != cv::CV_8UC3 || !frame.is_continuous() {
+                    return Err(format!(
+                        "video {}: frames must be continuous BGR (type {})",
+                        self.file_name,
+                        frame.typ()
+                    ));
+                }
+                w.write(frame.data_bytes().map_err(|e| e.message)?)
+            }
+        }
     }
 
-    pub fn finish(mut self) -> Result<(), String> {
-        self.writer.release().map_err(|e| e.message)
+    pub fn finish(self) -> Result<(), String> {
+        match self.encoder {
+            Encoder::OpenCv(mut w) => w.release().map_err(|e| e.message),
+            Encoder::Ffmpeg(w) => w.finish().map(|_| ()),
+        }
     }
 }
 
@@ -253,5 +292,72 @@ mod tests {
         let mut buf = vec![0u8; 32 * 48 * 3];
         assert!(reader.next_into(&mut buf).unwrap().is_err());
         assert!(VideoReader::open("/nonexistent.mp4", 64, 48, 30.0).is_err());
+    }
+
+    /// A frame of `w × h` BGR that moves with `k` (compression has work to do).
+    fn gradient(k: usize, w: usize, h: usize) -> cv::Mat {
+        let mut m = cv::Mat::new_rows_cols_with_default(
+            h as i32,
+            w as i32,
+            cv::CV_8UC3,
+            cv::Scalar::all(0.0),
+        )
+        .unwrap();
+        let bytes = m.data_bytes_mut().unwrap();
+        for y in 0..h {
+            for x in 0..w {
+                let i = 3 * (y * w + x);
+                bytes[i] = ((x + 3 * k) % 256) as u8;
+                bytes[i + 1] = ((y * 2) % 256) as u8;
+                bytes[i + 2] = 200;
+            }
+        }
+        m
+    }
+
+    /// Writes 20 frames at `crf` and reads them back: the mean absolute pixel error.
+    fn crf_round_trip(crf: u8) -> f64 {
+        let dir = tempfile::tempdir().unwrap();
+        let (w, h) = (96usize, 64usize);
+        let mut sink = VideoSink::create(
+            &dir.path().join("v"),
+            VideoCodec::H264Crf(crf),
+            w as u32,
+            h as u32,
+            30.0,
+        )
+        .unwrap();
+        assert_eq!(sink.file_name, "v.mp4");
+        for k in 0..20 {
+            sink.write(&gradient(k, w, h)).unwrap();
+        }
+        sink.finish().unwrap();
+        let path = dir.path().join("v.mp4");
+        let mut reader =
+            VideoReader::open(&path.to_string_lossy(), w as u32, h as u32, 30.0).unwrap();
+        let mut buf = vec![0u8; w * h * 3];
+        let (mut error, mut k) = (0.0, 0);
+        while let Some(t) = reader.next_into(&mut buf) {
+            assert!((t.unwrap() - k as f64 / 30.0).abs() < 1e-3, "frame {k}");
+            let want = gradient(k, w, h);
+            let want = want.data_bytes().unwrap();
+            error += buf
+                .iter()
+                .zip(want)
+                .map(|(a, b)| (*a as f64 - *b as f64).abs())
+                .sum::<f64>()
+                / buf.len() as f64;
+            k += 1;
+        }
+        assert_eq!(k, 20, "every frame written is read back, none dropped");
+        error / k as f64
+    }
+
+    #[test]
+    fn a_crf_video_reads_back_frame_for_frame_and_a_higher_crf_loses_more() {
+        let fine = crf_round_trip(12);
+        let coarse = crf_round_trip(40);
+        assert!(fine < 3.0, "crf 12: mean abs error {fine}");
+        assert!(coarse > fine, "crf 40: {coarse}, crf 12: {fine}");
     }
 }

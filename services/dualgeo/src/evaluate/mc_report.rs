@@ -3,7 +3,7 @@
 //! error against the stated 1σ over time, pooled over seeds.
 
 use super::mc_stats::{quantile, SceneSummary, TRUST_M};
-use super::monte_carlo::{NavModel, SceneRuns, WARM_UP_S};
+use super::monte_carlo::{Flown, NavModel, SceneRuns, WARM_UP_S};
 use std::fmt::Write;
 
 /// Issue #23's targets.
@@ -17,6 +17,9 @@ pub const BIAS_MAE_MAX_DEG: f64 = 1.5;
 pub const WORST_OVER_MEDIAN: f64 = 2.0;
 pub const FIRST_ESTIMATE_MAX_S: f64 = 6.0;
 pub const H_ACC_2M_MAX_S: f64 = 8.0;
+/// H.264 at crf 18, 23 and 28: median-seed horizontal MAE within this of the
+/// uncompressed flight's.
+pub const VIDEO_LINK_MAX_RATIO: f64 = 1.25;
 
 fn miss(m: bool) -> &'static str {
     if m {
@@ -38,20 +41,30 @@ fn secs(v: f64) -> String {
     }
 }
 
-/// The markdown section; `seconds` is the wall time of the runs.
-pub fn section(all: &[SceneRuns], duration_s: f64, every: u64, seconds: f64) -> String {
+/// The markdown section; `seconds` is the wall time of the call that flew `flown`.
+pub fn section(
+    all: &[SceneRuns],
+    duration_s: f64,
+    every: u64,
+    flown: Flown,
+    seconds: f64,
+) -> String {
     let mut w = String::new();
     let runs: usize = all.iter().map(|s| s.runs.len()).sum();
     let _ = writeln!(
         w,
-        "Each scene is flown over many seeds (navigation and image noise, the target's start on its route, the signs of the eq. (34) bias offset and drift), {duration_s:.0} s each, every {every} pair(s), under the paper's Table 2 errors (σ_att 2°, σ_pos 3 m, |δψ0| = 20°), through the same chain and default estimator as `dualgeo run`. {runs} runs in {seconds:.0} s on this 2-core machine. \"After {WARM_UP_S:.0} s\" columns count estimates from t = {WARM_UP_S:.0} s; calibration columns count every estimate from the first.\n"
+        "Each scene is flown over many seeds (navigation and image noise, the target's start on its route, the signs of the eq. (34) bias offset and drift), {duration_s:.0} s each, every {every} pair(s), under the paper's Table 2 errors (σ_att 2°, σ_pos 3 m, |δψ0| = 20°), through the same chain and default estimator as `dualgeo run`. {runs} runs: the last call flew {} of them in {seconds:.0} s on this 2-core machine and read {} back from `monte-carlo/runs/`. \"After {WARM_UP_S:.0} s\" columns count estimates from t = {WARM_UP_S:.0} s; calibration columns count every estimate from the first.\n",
+        flown.flown, flown.reused
     );
     let _ = writeln!(w, "- **MAE** (m): the median over runs of each run's MAE after {WARM_UP_S:.0} s, x / y / z, then the 90th percentile of the horizontal MAE and the worst run (its seed).");
     let _ = writeln!(w, "- **inside h_acc / v_acc**: the share of estimates whose horizontal (vertical) error is within the stated 1σ, pooled over seeds (target {}–{} %; a calibrated filter puts 63 % / 68 % inside). **gross**: beyond 3× the stated accuracy (target ≤ {GROSS_MAX_PCT} %). **NEES**: mean normalised error squared over x, y, z (3 if calibrated) and its 95 % region for that many runs.", WITHIN_PCT.0, WITHIN_PCT.1);
     let _ = writeln!(w, "- **mean z err**: mean vertical error after {WARM_UP_S:.0} s (an offset shows here; target |·| ≤ {MEAN_Z_MAX_M} m). **trust**: median seconds from the first pair until the 3-D error stays within {TRUST_M} m (worst run). **first / h_acc ≤ 2 m**: median seconds to the first estimate and to the first h_acc ≤ 2 m.");
     let _ = writeln!(w, "- Targets after {WARM_UP_S:.0} s: horizontal MAE ≤ {H_MAE_MAX_M} m, altitude ≤ {Z_MAE_MAX_M} m, bias ≤ {BIAS_MAE_MAX_DEG}° per UAV, the worst run within {WORST_OVER_MEDIAN}× the median. A **miss** marks a cell outside its target.\n");
     for nav in [NavModel::White, NavModel::GaussMarkov] {
-        let rows: Vec<&SceneRuns> = all.iter().filter(|s| s.nav == nav).collect();
+        let rows: Vec<&SceneRuns> = all
+            .iter()
+            .filter(|s| s.nav == nav && s.crf.is_none())
+            .collect();
         if rows.is_empty() {
             continue;
         }
@@ -72,7 +85,7 @@ pub fn section(all: &[SceneRuns], duration_s: f64, every: u64, seconds: f64) -> 
     }
     if let Some(d) = all
         .iter()
-        .find(|s| s.scene == "default" && s.nav == NavModel::White)
+        .find(|s| s.scene == "default" && s.nav == NavModel::White && s.crf.is_none())
     {
         let _ = writeln!(
             w,
@@ -97,7 +110,54 @@ pub fn section(all: &[SceneRuns], duration_s: f64, every: u64, seconds: f64) -> 
         }
         let _ = writeln!(w);
     }
+    video_link_table(&mut w, all);
     w
+}
+
+/// Item 5: the `default` scene's seeds through H.264 at each crf against the rendered
+/// pixels themselves.
+fn video_link_table(w: &mut String, all: &[SceneRuns]) {
+    let links: Vec<&SceneRuns> = all
+        .iter()
+        .filter(|s| s.scene == "default" && s.nav == NavModel::White)
+        .collect();
+    let Some(raw) = links.iter().find(|s| s.crf.is_none()) else {
+        return;
+    };
+    if links.len() < 2 {
+        return;
+    }
+    let _ = writeln!(
+        w,
+        "### H.264 video link (`default`, white errors, the same seeds)\n"
+    );
+    let _ = writeln!(w, "Every frame of both UAVs at 30 FPS encoded by libx264 (zero-latency tuning, 4:2:0, `veryfast`) through `ffmpeg` and decoded before detection and matching; the first row is the rendered pixels themselves (lossless). Target: median-seed horizontal MAE after {WARM_UP_S:.0} s within {VIDEO_LINK_MAX_RATIO}× of the lossless row's.\n");
+    let _ = writeln!(w, "| video | runs | located | MAE x / y / z | horiz. MAE (× lossless) | bias MAE L / R (°) | inside h_acc / v_acc | gross |");
+    let _ = writeln!(w, "| --- | --- | --- | --- | --- | --- | --- | --- |");
+    let raw_h = raw.summary.mae_median[3];
+    let mut sorted = links.clone();
+    sorted.sort_by_key(|s| s.crf.map_or(-1, i32::from));
+    for s in sorted {
+        let m = &s.summary;
+        let [mx, my, mz, mh] = m.mae_median;
+        let ratio = mh / raw_h;
+        let name = s.crf.map_or("lossless (rendered)".to_string(), |c| {
+            format!("H.264 crf {c}")
+        });
+        let _ = writeln!(
+            w,
+            "| {name} | {} | {:.1} % | {mx:.2} / {my:.2} / {mz:.2} | {mh:.2} ({ratio:.2}×){} | {:.2} / {:.2} | {:.0} / {:.0} % | {:.1} % |",
+            m.runs,
+            m.located_pct,
+            miss(s.crf.is_some() && !(ratio <= VIDEO_LINK_MAX_RATIO)),
+            m.bias_mae_median[0],
+            m.bias_mae_median[1],
+            m.within_h_acc_pct,
+            m.within_v_acc_pct,
+            m.gross_pct,
+        );
+    }
+    let _ = writeln!(w);
 }
 
 fn row(scene: &str, s: &SceneSummary, default_scene: bool) -> String {
@@ -189,6 +249,7 @@ pub fn json(all: &[SceneRuns]) -> serde_json::Value {
         "scenes": all.iter().map(|s| serde_json::json!({
             "scene": s.scene,
             "nav": s.nav.name(),
+            "crf": s.crf,
             "summary": s.summary,
         })).collect::<Vec<_>>(),
     })

@@ -23,6 +23,7 @@ mod report;
 mod stream;
 pub mod suite;
 mod suite_report;
+mod video_link;
 mod vision;
 
 use acquisition::sim::Presets;
@@ -80,9 +81,24 @@ pub struct EvaluateArgs {
     /// Seconds of each Monte Carlo run (default 20; 14 with --quick).
     #[arg(long)]
     pub mc_duration_s: Option<f64>,
+    /// H.264 crf values (0–51) the `default` scene's seeds are also flown through under
+    /// white errors, against the uncompressed pixels (default 18,23,28; 28 with
+    /// --quick; `--crf none` for none).
+    #[arg(long, value_delimiter = ',', value_parser = parse_crf)]
+    pub crf: Vec<Option<u8>>,
     /// Run every Monte Carlo run again instead of reusing the kept ones.
     #[arg(long)]
     pub fresh: bool,
+}
+
+fn parse_crf(text: &str) -> Result<Option<u8>, String> {
+    if text == "none" {
+        return Ok(None);
+    }
+    match text.parse::<u8>() {
+        Ok(c) if c <= 51 => Ok(Some(c)),
+        _ => Err(format!("`{text}` is not a crf (0–51) or `none`")),
+    }
 }
 
 /// Runs the scene suite one scene after another (so the CPU figures are not shared
@@ -238,6 +254,15 @@ fn run_monte_carlo(args: &EvaluateArgs) -> Result<()> {
         duration_s,
         every,
         matching,
+        crfs: if args.crf.is_empty() {
+            if quick {
+                vec![28]
+            } else {
+                vec![18, 23, 28]
+            }
+        } else {
+            args.crf.iter().flatten().copied().collect()
+        },
         cache: Some(dir.join("runs")),
         reuse: !args.fresh,
     };
@@ -249,14 +274,14 @@ fn run_monte_carlo(args: &EvaluateArgs) -> Result<()> {
         .unwrap_or_else(|_| ProgressStyle::default_bar()),
     );
     bar.set_message("Monte Carlo");
-    let all = monte_carlo::run(&plan, &bar)?;
+    let (all, flown) = monte_carlo::run(&plan, &bar)?;
     bar.finish();
     let seconds = started.elapsed().as_secs_f64();
     std::fs::create_dir_all(&dir).with_context(|| format!("create {}", dir.display()))?;
-    let section = mc_report::section(&all, duration_s, every, seconds);
+    let section = mc_report::section(&all, duration_s, every, flown, seconds);
     let mut md = format!("# Monte Carlo evaluation (issue #23)\n\nRegenerate with `cargo run --release -p dualgeo -- evaluate --monte-carlo` (resumes from `monte-carlo/runs/`; `--fresh` reruns all).\n\n{section}");
     for s in &all {
-        if s.scene != "default" {
+        if s.scene != "default" || s.crf.is_some() {
             continue;
         }
         let bins = mc_report::over_time(s, 0.5);

@@ -94,6 +94,9 @@ pub struct Plan {
     pub duration_s: f64,
     pub every: u64,
     pub matching: MatchingConfig,
+    /// H.264 crf values the `default` scene is also flown through under white errors
+    /// (item 5: the same seeds through a compressed video link).
+    pub crfs: Vec<u8>,
     /// Where each run is kept (`runs/`), written after every run.
     pub cache: Option<PathBuf>,
     /// Whether a kept run with the same key is read back instead of run again
@@ -106,14 +109,25 @@ pub struct Plan {
 pub struct SceneRuns {
     pub scene: String,
     pub nav: NavModel,
+    /// The H.264 crf of the video link, `None` for the rendered pixels themselves.
+    pub crf: Option<u8>,
     pub runs: Vec<RunRecord>,
     pub summary: SceneSummary,
 }
 
-/// One run: the seeded scene through the chain and the default estimator.
-pub fn run_one(config: SimConfig, every: u64, matching: &MatchingConfig) -> Result<RunRecord> {
+/// One run: the seeded scene through the chain and the default estimator, through an
+/// H.264 video link at `crf` when given.
+pub fn run_one(
+    config: SimConfig,
+    every: u64,
+    matching: &MatchingConfig,
+    crf: Option<u8>,
+) -> Result<RunRecord> {
     let estimator = estimator_for(&config);
-    let mut scene = SceneStream::new(config.clone(), every)?;
+    let mut scene = match crf {
+        Some(crf) => SceneStream::through_video(config.clone(), every, crf)?,
+        None => SceneStream::new(config.clone(), every)?,
+    };
     let mut lane = Lane::new(matching, estimator, false, false)?;
     let mut record = RunRecord {
         seed: config.seed,
@@ -159,14 +173,17 @@ pub fn run_one(config: SimConfig, every: u64, matching: &MatchingConfig) -> Resu
 
 /// The cache file of one run: named by scene, model and seed, keyed by everything that
 /// decides its result.
-fn cache_file(dir: &Path, scene: &str, nav: NavModel, seed: u64) -> PathBuf {
-    dir.join(format!("{scene}-{}-{seed:03}.json", nav.name()))
+fn cache_file(dir: &Path, scene: &str, nav: NavModel, crf: Option<u8>, seed: u64) -> PathBuf {
+    let link = crf.map(|c| format!("-crf{c}")).unwrap_or_default();
+    dir.join(format!("{scene}-{}{link}-{seed:03}.json", nav.name()))
 }
 
-fn run_key(config: &SimConfig, every: u64, matching: &MatchingConfig) -> String {
+fn run_key(config: &SimConfig, every: u64, matching: &MatchingConfig, crf: Option<u8>) -> String {
     let mut h = std::collections::hash_map::DefaultHasher::new();
+    // A run without a link keeps the key it had before links existed.
+    let link = crf.map(|c| format!(" crf {c}")).unwrap_or_default();
     format!(
-        "{RUN_FORMAT} {every} {:?} {:?} {:?} {}",
+        "{RUN_FORMAT} {every} {:?} {:?} {:?} {}{link}",
         config,
         matching,
         estimator_for(config),
@@ -182,8 +199,15 @@ struct Cached {
     record: RunRecord,
 }
 
+/// How many runs a call flew and how many it read back from the cache.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct Flown {
+    pub flown: usize,
+    pub reused: usize,
+}
+
 /// Runs the plan on every core, `progress` counting runs.
-pub fn run(plan: &Plan, progress: &indicatif::ProgressBar) -> Result<Vec<SceneRuns>> {
+pub fn run(plan: &Plan, progress: &indicatif::ProgressBar) -> Result<(Vec<SceneRuns>, Flown)> {
     let presets = Presets::builtin();
     let mut jobs = Vec::new();
     for nav in &plan.nav {
@@ -192,8 +216,17 @@ pub fn run(plan: &Plan, progress: &indicatif::ProgressBar) -> Result<Vec<SceneRu
                 .get(scene)
                 .with_context(|| format!("preset {scene}"))?;
             base.duration_s = plan.duration_s;
-            for seed in 1..=*seeds {
-                jobs.push((scene.clone(), *nav, seed, seeded(base.clone(), seed, *nav)));
+            let links = std::iter::once(None).chain(
+                plan.crfs
+                    .iter()
+                    .filter(|_| scene == "default" && *nav == NavModel::White)
+                    .map(|&c| Some(c)),
+            );
+            for crf in links {
+                for seed in 1..=*seeds {
+                    let config = seeded(base.clone(), seed, *nav);
+                    jobs.push((scene.clone(), *nav, crf, seed, config));
+                }
             }
         }
     }
@@ -204,26 +237,29 @@ pub fn run(plan: &Plan, progress: &indicatif::ProgressBar) -> Result<Vec<SceneRu
     let results: Mutex<Vec<Option<RunRecord>>> = Mutex::new(vec![None; jobs.len()]);
     let failure: Mutex<Option<anyhow::Error>> = Mutex::new(None);
     let next = AtomicUsize::new(0);
+    let reused = AtomicUsize::new(0);
     let threads = std::thread::available_parallelism().map_or(2, |n| n.get());
     std::thread::scope(|scope| {
         for _ in 0..threads {
             scope.spawn(|| loop {
                 let i = next.fetch_add(1, Ordering::Relaxed);
-                let Some((scene, nav, seed, config)) = jobs.get(i) else {
+                let Some((scene, nav, crf, seed, config)) = jobs.get(i) else {
                     break;
                 };
                 if failure.lock().map_or(true, |f| f.is_some()) {
                     break;
                 }
-                match run_cached(plan, scene, *nav, *seed, config) {
-                    Ok(r) => {
+                match run_cached(plan, scene, *nav, *crf, *seed, config) {
+                    Ok((r, from_cache)) => {
+                        reused.fetch_add(from_cache as usize, Ordering::Relaxed);
                         if let Ok(mut all) = results.lock() {
                             all[i] = Some(r);
                         }
                     }
                     Err(e) => {
+                        let link = crf.map(|c| format!(" crf {c}")).unwrap_or_default();
                         if let Ok(mut f) = failure.lock() {
-                            f.get_or_insert(e.context(format!("{scene} seed {seed}")));
+                            f.get_or_insert(e.context(format!("{scene}{link} seed {seed}")));
                         }
                     }
                 }
@@ -238,14 +274,18 @@ pub fn run(plan: &Plan, progress: &indicatif::ProgressBar) -> Result<Vec<SceneRu
         .into_inner()
         .map_err(|_| anyhow::anyhow!("a Monte Carlo run panicked"))?;
     let mut out: Vec<SceneRuns> = Vec::new();
-    for ((scene, nav, seed, _), record) in jobs.iter().zip(results) {
+    for ((scene, nav, crf, seed, _), record) in jobs.iter().zip(results) {
         let mut record = record.with_context(|| format!("{scene} seed {seed} gave nothing"))?;
         record.seed = *seed;
-        match out.iter_mut().find(|s| s.scene == *scene && s.nav == *nav) {
+        match out
+            .iter_mut()
+            .find(|s| s.scene == *scene && s.nav == *nav && s.crf == *crf)
+        {
             Some(s) => s.runs.push(record),
             None => out.push(SceneRuns {
                 scene: scene.clone(),
                 nav: *nav,
+                crf: *crf,
                 runs: vec![record],
                 summary: summarise(&[], WARM_UP_S),
             }),
@@ -254,28 +294,39 @@ pub fn run(plan: &Plan, progress: &indicatif::ProgressBar) -> Result<Vec<SceneRu
     for s in &mut out {
         s.summary = summarise(&s.runs, WARM_UP_S);
     }
-    Ok(out)
+    let reused = reused.into_inner();
+    Ok((
+        out,
+        Flown {
+            flown: jobs.len() - reused,
+            reused,
+        },
+    ))
 }
 
 fn run_cached(
     plan: &Plan,
     scene: &str,
     nav: NavModel,
+    crf: Option<u8>,
     seed: u64,
     config: &SimConfig,
-) -> Result<RunRecord> {
-    let key = run_key(config, plan.every, &plan.matching);
-    let file = plan.cache.as_ref().map(|d| cache_file(d, scene, nav, seed));
+) -> Result<(RunRecord, bool)> {
+    let key = run_key(config, plan.every, &plan.matching, crf);
+    let file = plan
+        .cache
+        .as_ref()
+        .map(|d| cache_file(d, scene, nav, crf, seed));
     if let (Some(f), true) = (&file, plan.reuse) {
         if let Ok(text) = std::fs::read_to_string(f) {
             if let Ok(c) = serde_json::from_str::<Cached>(&text) {
                 if c.key == key {
-                    return Ok(c.record);
+                    return Ok((c.record, true));
                 }
             }
         }
     }
-    let record = run_one(config.clone(), plan.every, &plan.matching)?;
+    let record = run_one(config.clone(), plan.every, &plan.matching, crf)?;
     if let Some(f) = &file {
         let tmp = f.with_extension("json.tmp");
         let text = serde_json::to_string(&Cached {
@@ -285,7 +336,7 @@ fn run_cached(
         std::fs::write(&tmp, text).with_context(|| format!("write {}", tmp.display()))?;
         std::fs::rename(&tmp, f).with_context(|| format!("write {}", f.display()))?;
     }
-    Ok(record)
+    Ok((record, false))
 }
 
 #[cfg(test)]

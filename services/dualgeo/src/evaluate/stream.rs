@@ -5,6 +5,7 @@
 //! vision chain and estimators on the same pixels. Truth comes along for scoring only; nothing
 //! here gives it to the chain or the estimators.
 
+use super::video_link::VideoLink;
 use acquisition::sim::{SimConfig, SimStep, Simulator};
 use anyhow::Result;
 use detection::prediction_gate::{self, GateConfig, RecentPredictions, TargetPrediction};
@@ -52,6 +53,8 @@ pub struct SceneStream {
     every: u64,
     k: u64,
     geometry: FrameGeometry,
+    /// When set, the chain sees these decoded H.264 frames instead of the rendered ones.
+    link: Option<VideoLink>,
 }
 
 impl SceneStream {
@@ -75,7 +78,17 @@ impl SceneStream {
             images: [blank()?, blank()?],
             every: every.max(1),
             k: 0,
+            link: None,
         })
+    }
+
+    /// Streams `config`'s route as [`SceneStream::new`] does, with every frame through
+    /// H.264 at `crf` ([`VideoLink`]).
+    pub fn through_video(config: SimConfig, every: u64, crf: u8) -> Result<Self> {
+        let link = VideoLink::encode(&config, crf)?;
+        let mut stream = Self::new(config, every)?;
+        stream.link = Some(link);
+        Ok(stream)
     }
 
     /// What the default estimator made of pair `pair_seq` (the frames' `seq`): later
@@ -118,12 +131,19 @@ impl SceneStream {
             if self.k.is_multiple_of(self.every) {
                 break step;
             }
+            if let Some(link) = &mut self.link {
+                link.skip_pair()?;
+            }
         };
         {
             let [l, r] = &mut self.images;
             let stride = 3 * self.geometry.width as usize;
+            // Rendered also through a link: visibility (truth) reads the renderer.
             self.sim
                 .render_pair(&step, l.data_bytes_mut()?, r.data_bytes_mut()?, stride);
+            if let Some(link) = &mut self.link {
+                link.read_pair(l.data_bytes_mut()?, r.data_bytes_mut()?)?;
+            }
         }
         let mut detections = [None, None];
         for (i, d) in detections.iter_mut().enumerate() {
