@@ -73,13 +73,23 @@ pub fn section(
             NavModel::GaussMarkov => "correlated navigation errors (GPS Gauss–Markov τ 120 s + 0.3 m jitter, AHRS τ 10 s + 0.2°)",
         };
         let _ = writeln!(w, "### {title}\n");
+        if nav == NavModel::GaussMarkov {
+            let _ = writeln!(w, "A GPS error that wanders with τ 120 s cannot be averaged away in a 20 s flight, so here only the calibration columns (inside h_acc / v_acc, gross, NEES, mean z err) have targets; the accuracy columns are reported beside the white model's.\n");
+        }
         let _ = writeln!(w, "| scene | runs | located | MAE x / y / z | horiz. p90 / worst (seed) | bias MAE L / R (°) | inside h_acc / v_acc | gross | NEES (95 % region) | mean z err | trust s (worst) | first / h_acc ≤ 2 m (s) |");
         let _ = writeln!(
             w,
             "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |"
         );
         for s in rows {
-            let _ = writeln!(w, "{}", row(&s.scene, &s.summary, s.scene == "default"));
+            let targets = if nav == NavModel::GaussMarkov {
+                Targets::CalibrationOnly
+            } else if s.scene == "default" {
+                Targets::AllAndTiming
+            } else {
+                Targets::All
+            };
+            let _ = writeln!(w, "{}", row(&s.scene, &s.summary, targets));
         }
         let _ = writeln!(w);
     }
@@ -160,16 +170,27 @@ fn video_link_table(w: &mut String, all: &[SceneRuns]) {
     let _ = writeln!(w);
 }
 
-fn row(scene: &str, s: &SceneSummary, default_scene: bool) -> String {
+/// Which of issue #23's targets a row is held to.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Targets {
+    /// Every target, and the first-estimate timing of the `default` scene.
+    AllAndTiming,
+    All,
+    /// Under correlated navigation errors: the calibration targets only.
+    CalibrationOnly,
+}
+
+fn row(scene: &str, s: &SceneSummary, targets: Targets) -> String {
     let [mx, my, mz, mh] = s.mae_median;
+    let accuracy = targets != Targets::CalibrationOnly;
     let worst_h = s.worst.1[0].hypot(s.worst.1[1]);
-    let worst_miss = worst_h > WORST_OVER_MEDIAN * mh;
-    let bias_miss = s
-        .bias_mae_median
-        .iter()
-        .any(|b| b.is_nan() || *b > BIAS_MAE_MAX_DEG);
+    let worst_miss = accuracy && worst_h > WORST_OVER_MEDIAN * mh;
+    let bias_miss = accuracy
+        && s.bias_mae_median
+            .iter()
+            .any(|b| b.is_nan() || *b > BIAS_MAE_MAX_DEG);
     let nees_miss = outside(s.mean_nees, (s.nees_bounds[0], s.nees_bounds[1]));
-    let timing_miss = default_scene
+    let timing_miss = targets == Targets::AllAndTiming
         && (s.first_estimate_median_s > FIRST_ESTIMATE_MAX_S
             || s.h_acc_2m_median_s > H_ACC_2M_MAX_S);
     format!(
@@ -178,7 +199,7 @@ fn row(scene: &str, s: &SceneSummary, default_scene: bool) -> String {
         s.located_pct,
         miss(s.located_pct < 90.0),
         s.located_not_visible,
-        miss(mh > H_MAE_MAX_M || mz > Z_MAE_MAX_M),
+        miss(accuracy && (mh > H_MAE_MAX_M || mz > Z_MAE_MAX_M)),
         s.mae_p90[3],
         s.worst.0,
         miss(worst_miss),
