@@ -159,7 +159,7 @@ fn video_link_table(w: &mut String, all: &[SceneRuns]) {
             "| {name} | {} | {:.1} % | {mx:.2} / {my:.2} / {mz:.2} | {mh:.2} ({ratio:.2}×){} | {:.2} / {:.2} | {:.0} / {:.0} % | {:.1} % |",
             m.runs,
             m.located_pct,
-            miss(s.crf.is_some() && !(ratio <= VIDEO_LINK_MAX_RATIO)),
+            miss(s.crf.is_some() && (ratio.is_nan() || ratio > VIDEO_LINK_MAX_RATIO)),
             m.bias_mae_median[0],
             m.bias_mae_median[1],
             m.within_h_acc_pct,
