@@ -8,8 +8,8 @@
 //! `ffmpeg`/libx264 ([`acquisition::flight::x264`]: zero-latency tuning, 4:2:0). The
 //! stream then decodes each video frame by frame in step with the simulator and hands
 //! the decoded pixels to the detector and the chain instead of the rendered ones; the
-//! frames between two streamed pairs are decoded and dropped (an H.264 decoder cannot
-//! skip them). Truth, poses and visibility still come from the stream's own simulator.
+//! frames between two streamed pairs are decoded and dropped (an H.264 decoder needs
+//! them as references). Truth, poses and visibility still come from the stream's own simulator.
 
 use acquisition::flight::video::VideoReader;
 use acquisition::flight::x264::X264Writer;
