@@ -140,3 +140,62 @@ fn presets_can_be_listed_printed_and_are_checked() {
         stderr(&o)
     );
 }
+
+/// Issue #23 item 5: `--crf` encodes the flight's H.264 at that quality through
+/// `ffmpeg`; it is refused where it means nothing (a recording, a lossless flight) or
+/// outside x264's range, before anything is rendered.
+#[test]
+fn a_flight_is_encoded_at_the_crf_asked_and_bad_crfs_are_refused() {
+    let dir = Scratch::new("crf-flight");
+    let o = dualgeo(&[
+        "simulate",
+        "--preset",
+        "default",
+        "--duration-s",
+        "0.5",
+        "--flight-out",
+        dir.0.to_str().unwrap(),
+        "--crf",
+        "28",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(
+        stderr(&o).contains("libx264 through ffmpeg"),
+        "{}",
+        stderr(&o)
+    );
+    for uav in ["left", "right"] {
+        let video = dir.0.join(format!("{uav}.mp4"));
+        let bytes = std::fs::read(&video).unwrap_or_default();
+        // An MP4 starts with its `ftyp` box.
+        assert!(
+            bytes.len() > 1000 && &bytes[4..8] == b"ftyp",
+            "{}",
+            video.display()
+        );
+    }
+    let recording = Scratch::new("crf-recording");
+    let refused = [
+        vec!["--out", recording.0.to_str().unwrap(), "--crf", "18"],
+        vec![
+            "--flight-out",
+            recording.0.to_str().unwrap(),
+            "--flight-video",
+            "lossless",
+            "--crf",
+            "18",
+        ],
+        vec!["--flight-out", recording.0.to_str().unwrap(), "--crf", "52"],
+    ];
+    for args in refused {
+        let mut all = vec!["simulate", "--preset", "default", "--duration-s", "0.5"];
+        all.extend(&args);
+        let o = dualgeo(&all);
+        assert!(!o.status.success(), "{args:?} was taken");
+        assert!(stderr(&o).contains("crf"), "{args:?}: {}", stderr(&o));
+        assert!(
+            !recording.0.join("left.mp4").exists(),
+            "{args:?} wrote a video"
+        );
+    }
+}

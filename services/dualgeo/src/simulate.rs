@@ -30,7 +30,7 @@ pub struct SimulateArgs {
     /// Encode the flight's H.264 at this crf (0–51; 18 near-transparent, 28 a thin
     /// link) through FFmpeg's command-line tool instead of OpenCV's writer, whose H.264
     /// is always x264's default (crf 23).
-    #[arg(long, requires = "flight_out", value_parser = clap::value_parser!(u8).range(0..=51))]
+    #[arg(long, conflicts_with = "out", value_parser = clap::value_parser!(u8).range(0..=51))]
     crf: Option<u8>,
     /// Write the recording's images as JPEG of this quality (1–100) instead of PNG:
     /// several times faster to decode on replay (docs/pipeline.md measures both).
