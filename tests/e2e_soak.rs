@@ -1,8 +1,8 @@
 //! Issue #13's CI soak: a looped recording for 60 s with the soak report sampled every
 //! 5 s. The report is written as the run goes (soak.csv, track.csv readable while it
-//! runs), every process is sampled, no descriptor leaks after the warm-up, and memory
-//! stays within 2 % over the 40 s after it (the 1 % target is for the 1 h soak in
-//! docs/reliability.md: 40 s cannot show a slow leak, a fast one it can).
+//! runs), every process is sampled, no descriptor leaks after the warm-up, and memory's
+//! floor rises by at most 2 % over the 40 s after it (the 1 % target is for the 1 h soak
+//! in docs/reliability.md: 40 s cannot show a slow leak, a fast one it can).
 
 #[path = "support/chaos.rs"]
 mod chaos;
@@ -70,15 +70,28 @@ fn a_sixty_second_soak_reports_flat_memory_and_streams_its_outputs() {
         let values: Vec<f64> = after.iter().map(|s| s[col]).collect();
         if name.starts_with("rss_kib_") {
             assert!(values.iter().all(|v| *v > 1000.0), "{name}: {values:?}");
-            let first = values[0];
-            let worst = values
-                .iter()
-                .map(|v| (v - first).abs() / first)
-                .fold(0.0, f64::max);
+            // A leak raises the floor; a sample taken while a process holds a transient
+            // working set (most likely one update's matrices, a few hundred KiB, given
+            // back after it: RSS falls again) only rises above it.
+            // Measured: geolocation at 9 040–9 300 KiB, back to 9 040 between, failed
+            // a test against the first sample at 2 %. So the floor of the last three
+            // samples is held to the floor of the first three, and no sample may be
+            // more than 10 % above it.
+            eprintln!("{name}: {values:?}");
+            assert!(values.len() >= 6, "{name}: {values:?}");
+            let floor = |v: &[f64]| v.iter().copied().fold(f64::INFINITY, f64::min);
+            let (head, tail) = (floor(&values[..3]), floor(&values[values.len() - 3..]));
+            let rise = (tail - head) / head;
             assert!(
-                worst <= 0.02,
-                "{name} drifted {:.1} %: {values:?}",
-                worst * 100.0
+                rise <= 0.02,
+                "{name}: floor rose {:.1} %: {values:?}",
+                rise * 100.0
+            );
+            let peak = values.iter().copied().fold(0.0, f64::max);
+            assert!(
+                peak <= 1.10 * head,
+                "{name}: peak {:.1} % above the floor: {values:?}",
+                (peak / head - 1.0) * 100.0
             );
         }
         if name.starts_with("fds_") {
