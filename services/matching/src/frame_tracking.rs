@@ -37,8 +37,8 @@
 
 use crate::chain::{extract_undistorted, ChainCounts, ChainError, FrameInput, FrameMeta};
 use crate::config::MatchingConfig;
-use crate::epipolar::usac_params;
 use crate::features::{Features, OrbExtractor};
+use crate::robust_fit::{seed_cv_rng, usac_params};
 use opencv::core as cv;
 use opencv::prelude::*;
 use shared_types::conventions::{Intrinsics, Uav};
@@ -391,7 +391,7 @@ impl FrameTracker {
         let mut params = usac_params(&self.config, self.ransac_px)?;
         params.max_iterations = self.config.homography_max_iterations;
         let mut mask = cv::Mat::default();
-        crate::epipolar::seed_cv_rng(&[0xf011_0000, frame.seq, kept.len() as u64])?;
+        seed_cv_rng(&[0xf011_0000, frame.seq, kept.len() as u64])?;
         let homography = opencv::calib3d::find_homography_1(&from, &to, &mut mask, params)?;
         if homography.rows() != 3 || mask.rows() != kept.len() as i32 {
             return Ok(None);

@@ -28,7 +28,7 @@
 //! (counted as [`PlaneModel::EssentialFallback`]).
 
 use crate::config::MatchingConfig;
-use crate::epipolar::usac_params;
+use crate::robust_fit::usac_params;
 use nalgebra::{Matrix3, Vector3};
 use opencv::core as cv;
 use opencv::prelude::*;

@@ -21,6 +21,7 @@ pub mod intake;
 pub mod ring;
 pub mod ring_snapshot;
 pub mod ring_store;
+pub mod robust_fit;
 
 pub use chain::{
     estimate_matched, extract_undistorted, ChainCounts, ChainOutcome, ChainResult, ChainTiming,

@@ -9,7 +9,7 @@ use opencv::core as cv;
 use opencv::prelude::*;
 use std::path::Path;
 
-pub(super) const PNG_SIGNATURE: [u8; 8] = [0x89, b'P', b'N', b'G', 0x0d, 0x0a, 0x1a, 0x0a];
+use super::image_header::PNG_SIGNATURE;
 const PNG_IEND: [u8; 12] = [0, 0, 0, 0, b'I', b'E', b'N', b'D', 0xae, 0x42, 0x60, 0x82];
 
 fn unreadable(path: &Path, reason: impl Into<String>) -> RecordingError {

@@ -3,9 +3,12 @@
 //! before the decoder allocates for it. PNG: the IHDR chunk; JPEG: the first
 //! start-of-frame marker.
 
+/// The eight bytes every PNG file starts with.
+pub(super) const PNG_SIGNATURE: [u8; 8] = [0x89, b'P', b'N', b'G', 0x0d, 0x0a, 0x1a, 0x0a];
+
 /// Width and height declared by a PNG or JPEG header, or why they cannot be read.
 pub fn declared_size(bytes: &[u8]) -> Result<(u32, u32), String> {
-    if bytes.starts_with(&super::image_file::PNG_SIGNATURE) {
+    if bytes.starts_with(&PNG_SIGNATURE) {
         return png_size(bytes);
     }
     if bytes.starts_with(&[0xff, 0xd8]) {

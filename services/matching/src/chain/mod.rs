@@ -566,7 +566,7 @@ impl VisionChain {
                 .iter()
                 .map(|((uav, kf), prior)| {
                     // Same fit, same draws, whichever pool thread runs it.
-                    if let Err(e) = crate::epipolar::seed_cv_rng(&[
+                    if let Err(e) = crate::robust_fit::seed_cv_rng(&[
                         uav.index() as u64,
                         kf.seq,
                         metas[0].seq,
