@@ -85,9 +85,8 @@ impl SceneStream {
     /// Streams `config`'s route as [`SceneStream::new`] does, with every frame through
     /// H.264 at `crf` ([`VideoLink`]).
     pub fn through_video(config: SimConfig, every: u64, crf: u8) -> Result<Self> {
-        let link = VideoLink::encode(&config, crf)?;
-        let mut stream = Self::new(config, every)?;
-        stream.link = Some(link);
+        let mut stream = Self::new(config.clone(), every)?;
+        stream.link = Some(VideoLink::encode(&config, stream.sim.city().clone(), crf)?);
         Ok(stream)
     }
 

@@ -13,8 +13,10 @@
 
 use acquisition::flight::video::VideoReader;
 use acquisition::flight::x264::X264Writer;
+use acquisition::sim::city::City;
 use acquisition::sim::{SimConfig, Simulator};
 use anyhow::{Context, Result};
+use std::sync::Arc;
 
 /// Both UAVs' videos, encoded, read back in frame order.
 pub struct VideoLink {
@@ -25,8 +27,9 @@ pub struct VideoLink {
 }
 
 impl VideoLink {
-    /// Renders and encodes `config`'s flight at `crf`.
-    pub fn encode(config: &SimConfig, crf: u8) -> Result<Self> {
+    /// Renders and encodes `config`'s flight at `crf` in `city` (the stream's town,
+    /// not built a second time).
+    pub fn encode(config: &SimConfig, city: Arc<City>, crf: u8) -> Result<Self> {
         let dir = tempfile::Builder::new()
             .prefix("dualgeo-video-link-")
             .tempdir()
@@ -39,7 +42,7 @@ impl VideoLink {
             X264Writer::create(&paths[i], w, h, rate, crf).map_err(|e| anyhow::anyhow!(e))
         };
         let mut writers = [writer(0)?, writer(1)?];
-        let mut sim = Simulator::new(config.clone())?;
+        let mut sim = Simulator::with_city(config.clone(), city)?;
         let mut images = [vec![0u8; frame_bytes], vec![0u8; frame_bytes]];
         while let Some(step) = sim.step() {
             let [l, r] = &mut images;
