@@ -5,13 +5,14 @@
 //! ([`yolo`]). Detectors see pixels only, never truth.
 
 mod colour_blob;
+pub mod constellation;
 pub mod frame_view;
 mod partial_view;
 pub mod prediction_gate;
 mod tracked;
 pub mod yolo;
 
-pub use colour_blob::{ColourBlobConfig, ColourBlobDetector};
+pub use colour_blob::{ColourBlobConfig, ColourBlobDetector, MAX_LANDMARKS};
 pub use partial_view::{PartialViewConfig, PartialViewGuard, TrackHint};
 pub use tracked::{TrackCounts, TrackedDetector};
 

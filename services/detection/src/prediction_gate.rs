@@ -206,14 +206,20 @@ pub const ESTIMATE_LAG_PAIRS: u64 = 2;
 
 /// The last few estimates by pair, for [`ESTIMATE_LAG_PAIRS`].
 ///
-/// An estimate that gives nothing to gate with (converging, coasting) lifts the gate.
-/// Holding the last trusted prediction through it instead (up to 3 s) was measured
-/// over 8 seeds of `suite_traffic` and was worse (gross errors 24 → 48 %): a filter that
-/// had taken the look-alike kept it.
+/// An estimate that gives nothing to gate with (converging, coasting) leaves the newest
+/// trusted one in force until it is older than `max_age_s` ([`gate_for`]): while the
+/// target is hidden the filter coasts, and a blob of its colour far from where it
+/// should be is not it. Measured over 8 seeds of `suite_traffic` this was worse when the
+/// detector still took a lone look-alike far from a fresh track (gross errors 24 →
+/// 48 %: a filter that had taken the look-alike kept it); with the constellation and
+/// the lone-blob rule (`constellation.rs`, `colour_blob.rs`) it is better (see
+/// CHANGELOG).
 #[derive(Debug, Default)]
 pub struct RecentPredictions {
     /// (pair_seq, prediction), oldest first; at most 8.
     items: std::collections::VecDeque<(u64, Option<TargetPrediction>)>,
+    /// The newest trusted prediction that has left `items`.
+    evicted: Option<(u64, TargetPrediction)>,
 }
 
 impl RecentPredictions {
@@ -221,18 +227,24 @@ impl RecentPredictions {
     /// e.g. the filter was converging).
     pub fn push(&mut self, pair_seq: u64, prediction: Option<TargetPrediction>) {
         if self.items.len() == 8 {
-            self.items.pop_front();
+            if let Some((s, Some(p))) = self.items.pop_front() {
+                self.evicted = Some((s, p));
+            }
         }
         self.items.push_back((pair_seq, prediction));
     }
 
-    /// The prediction that gates the frames of pair `seq`.
+    /// The prediction that gates the frames of pair `seq`: the newest trusted one at
+    /// least [`ESTIMATE_LAG_PAIRS`] pairs older (how old it may be is [`gate_for`]'s
+    /// call).
     pub fn for_pair(&self, seq: u64) -> Option<TargetPrediction> {
+        let lagged = |s: &u64| s.saturating_add(ESTIMATE_LAG_PAIRS) <= seq;
         self.items
             .iter()
             .rev()
-            .find(|(s, _)| s.saturating_add(ESTIMATE_LAG_PAIRS) <= seq)
-            .and_then(|(_, p)| *p)
+            .filter(|(s, _)| lagged(s))
+            .find_map(|(_, p)| *p)
+            .or_else(|| self.evicted.filter(|(s, _)| lagged(s)).map(|(_, p)| p))
     }
 }
 
@@ -315,10 +327,18 @@ mod tests {
             r.push(seq, (seq != 16).then_some(p));
         }
         assert_eq!(r.for_pair(19).map(|p| p.t_s), Some(17.0));
-        // The estimate two back said nothing (converging): no gate, not an older one.
-        assert!(r.for_pair(18).is_none());
-        // Only the last 8 are kept.
-        assert!(r.for_pair(12).is_none());
+        // The estimate two back said nothing (coasting): the newest trusted one before
+        // it stands (gate_for decides whether it is too old).
+        assert_eq!(r.for_pair(18).map(|p| p.t_s), Some(15.0));
+        // Kept: the last 8, and the newest trusted one before them.
+        assert_eq!(r.for_pair(13).map(|p| p.t_s), Some(11.0));
+        assert_eq!(r.for_pair(12).map(|p| p.t_s), None);
+        let mut quiet = RecentPredictions::default();
+        quiet.push(0, Some(prediction(0.0, 0.0)));
+        for seq in 1..30 {
+            quiet.push(seq, None);
+        }
+        assert_eq!(quiet.for_pair(30).map(|p| p.t_s), Some(10.0));
     }
 
     #[test]

@@ -37,6 +37,16 @@ pub struct TrackedDetector {
     gate_config: GateConfig,
     /// Per camera: when it last found the target (inside its gate, if it had one).
     last_found: [Option<f64>; 2],
+    /// Per camera: the other blobs of the target's colour in the frame where it was
+    /// last seen (the hint's landmarks, `constellation.rs`), nearest first.
+    landmarks: [Vec<[f64; 2]>; 2],
+    /// Per camera: when a whole-frame look last saw a blob of the target's colour
+    /// besides the target, and frames since the last whole-frame look.
+    look_alike_seen: [Option<f64>; 2],
+    since_whole: [u32; 2],
+    /// `[detection] look_alike_memory_s` and `whole_frame_every`.
+    look_alike_memory_s: f64,
+    whole_frame_every: u32,
     counts: TrackCounts,
     retries_seen: u64,
     windows_seen: (u64, u64),
@@ -48,6 +58,11 @@ impl TrackedDetector {
         Ok(Self {
             gate_config: config.gate,
             last_found: [None; 2],
+            landmarks: std::array::from_fn(|_| Vec::with_capacity(crate::MAX_LANDMARKS + 8)),
+            look_alike_seen: [None; 2],
+            since_whole: [0; 2],
+            look_alike_memory_s: config.look_alike_memory_s,
+            whole_frame_every: config.whole_frame_every,
             detector: ColourBlobDetector::new(config)?,
             guards: [guard; 2],
             counts: TrackCounts::default(),
@@ -85,9 +100,11 @@ impl TrackedDetector {
             self.last_found[camera].is_some_and(|t| t_s - t > self.gate_config.reacquire_after_s);
         let gate = gate.filter(|_| self.gate_config.enabled && !lost);
         let reacquiring = lost && gate.is_none();
-        // The image track refines the gate: its hint stands when it lies inside the
-        // gate; otherwise the blob nearest the predicted pixel (inside the gate) wins.
-        let hint = match (guard.hint(t_s), gate) {
+        // The image track refines the gate: its hint (with its landmarks) stands when it
+        // lies inside the gate; otherwise the blob nearest the predicted pixel (inside
+        // the gate) wins.
+        let own = guard.hint(t_s);
+        let hint = match (own, gate) {
             (Some(h), Some(g)) if !g.contains(h.centre) => Some(TrackHint {
                 centre: g.centre,
                 fresh: false,
@@ -101,7 +118,32 @@ impl TrackedDetector {
             (h, _) => h,
         };
         self.detector.set_gate(gate);
-        let found = self.detector.detect_near(frame, hint);
+        let look_alike_lately = self.look_alike_seen[camera]
+            .is_some_and(|t| (t_s - t).abs() <= self.look_alike_memory_s);
+        self.detector.set_lone_blob_ok(!look_alike_lately);
+        if self.whole_frame_every > 0 && self.since_whole[camera] + 1 >= self.whole_frame_every {
+            self.detector.look_at_whole_frame_next();
+        }
+        let landmarks = &self.landmarks[camera];
+        let found = if hint == own {
+            self.detector.set_landmarks(landmarks);
+            self.detector.detect_near(frame, hint)
+        } else {
+            // The track's pixel is outside the gate: the camera swung (the gate, drawn
+            // with this frame's attitude, moved with it) or the track is on something
+            // else. If landmarks moved in line with a candidate inside the gate, that is
+            // the target; otherwise the blob nearest the gate's centre.
+            let mut found = Ok(None);
+            if own.is_some_and(|h| h.fresh) && !landmarks.is_empty() {
+                self.detector.set_landmarks(landmarks);
+                found = self.detector.detect_near(frame, own);
+            }
+            if matches!(found, Ok(None)) {
+                self.detector.set_landmarks(&[]);
+                found = self.detector.detect_near(frame, hint);
+            }
+            found
+        };
         self.detector.set_gate(None);
         if matches!(found, Ok(None)) && gate.is_some() && self.detector.gated_blobs() > 0 {
             self.counts.gated_out += 1;
@@ -113,9 +155,35 @@ impl TrackedDetector {
         self.counts.window_looks += looks - self.windows_seen.0;
         self.counts.window_misses += misses - self.windows_seen.1;
         self.windows_seen = (looks, misses);
+        let whole = self.detector.last_look_was_whole();
+        self.since_whole[camera] = if whole {
+            0
+        } else {
+            self.since_whole[camera].saturating_add(1)
+        };
         let Some(detection) = found? else {
             return Ok(None);
         };
+        // Look-alikes are counted only beside a found target: a lone blob nobody took
+        // may be the target itself, moved.
+        if whole && self.detector.looked_at().count() > 1 {
+            self.look_alike_seen[camera] = Some(t_s);
+        }
+        // The track moves to this detection (whole or partly hidden): so do its
+        // landmarks.
+        let c = detection.centre;
+        let landmarks = &mut self.landmarks[camera];
+        landmarks.clear();
+        landmarks.extend(
+            self.detector
+                .looked_at()
+                .filter(|b| (b[0] - c[0]).hypot(b[1] - c[1]) > 0.5),
+        );
+        landmarks.sort_by(|a, b| {
+            let d = |p: &[f64; 2]| (p[0] - c[0]).hypot(p[1] - c[1]);
+            d(a).total_cmp(&d(b))
+        });
+        landmarks.truncate(crate::MAX_LANDMARKS);
         if guard.accept(t_s, &detection) {
             self.last_found[camera] = Some(t_s);
             if reacquiring {
@@ -140,6 +208,59 @@ mod tests {
 
     fn frame_with_red(x: i32, w: i32) -> cv::Mat {
         crate::colour_blob::tests::frame_with_rect(x, 50, w, 9, [36.0, 28.0, 214.0])
+    }
+
+    /// 640×480 with red cars (centre x, y).
+    fn street(cars: &[(i32, i32)]) -> cv::Mat {
+        let mut m = cv::Mat::new_rows_cols_with_default(
+            480,
+            640,
+            cv::CV_8UC3,
+            cv::Scalar::new(90.0, 110.0, 95.0, 0.0),
+        )
+        .unwrap();
+        for &(x, y) in cars {
+            let rect = cv::Rect::new(x - 12, y - 5, 25, 11);
+            let red = cv::Scalar::new(36.0, 28.0, 214.0, 0.0);
+            opencv::imgproc::rectangle(&mut m, rect, red, -1, opencv::imgproc::LINE_8, 0).unwrap();
+        }
+        m
+    }
+
+    #[test]
+    fn a_lone_look_alike_is_not_taken_while_the_target_hides_but_a_lone_target_is() {
+        let dt = 1.0 / 30.0;
+        // The target at (500, 150), then 250 px away a look-alike comes into view: the
+        // window around the target misses it, every `whole_frame_every`-th look sees it.
+        let mut d = TrackedDetector::new(ColourBlobConfig::default()).unwrap();
+        for k in 0..20 {
+            let cars = [(500, 150 + k), (300, 330)];
+            let in_view = if k == 0 { &cars[..1] } else { &cars[..] };
+            let found = d
+                .detect(0, k as f64 * dt, &street(in_view))
+                .unwrap()
+                .unwrap();
+            assert_eq!(found.centre[0], 500.0);
+        }
+        // The target slides under a bridge: the look-alike is the only red blob.
+        for k in 20..40 {
+            let t = k as f64 * dt;
+            assert!(
+                d.detect(0, t, &street(&[(300, 330)])).unwrap().is_none(),
+                "{t}"
+            );
+        }
+        // Without a look-alike lately, a lone blob far from the hint is the target
+        // (the camera swung 150 px in one frame).
+        let mut d = TrackedDetector::new(ColourBlobConfig::default()).unwrap();
+        for k in 0..20 {
+            assert!(d
+                .detect(0, k as f64 * dt, &street(&[(500, 150 + k)]))
+                .unwrap()
+                .is_some());
+        }
+        let swung = d.detect(0, 20.0 * dt, &street(&[(350, 170)])).unwrap();
+        assert_eq!(swung.map(|f| f.centre), Some([350.0, 170.0]));
     }
 
     #[test]

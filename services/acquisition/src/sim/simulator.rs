@@ -4,7 +4,7 @@
 use super::city::City;
 use super::lens::LensMap;
 use super::motion::{Motion, Route, TrueState};
-use super::render::{CameraView, Renderer, Surface, TrafficBox, VehicleBox};
+use super::render::{CameraView, Renderer, Surface, TrafficBox, VehicleBox, VEHICLE_TOP_BGR};
 use super::scenario::SimConfig;
 use super::SimError;
 use nalgebra::Point3;
@@ -40,6 +40,9 @@ pub struct SimFrame {
 pub struct SimStep {
     pub frames: [SimFrame; 2],
     pub vehicle: VehicleBox,
+    /// Truth for scoring: the top centres of the traffic cars coloured like the target
+    /// (look-alikes), ENU; the first four.
+    pub look_alikes: [Option<[f64; 3]>; 4],
 }
 
 pub struct Simulator {
@@ -173,9 +176,20 @@ impl Simulator {
                 }
             })
             .collect();
+        let ground_z = self.config.city.ground_z_m;
+        let mut look_alikes = [None; 4];
+        let same_colour = self.traffic.iter().filter(|t| t.top_bgr == VEHICLE_TOP_BGR);
+        for (slot, t) in look_alikes.iter_mut().zip(same_colour) {
+            let p = t.body.top_centre(ground_z);
+            *slot = Some([p.x, p.y, p.z]);
+        }
         let frames = [Uav::Left, Uav::Right].map(|uav| self.frame(&state, uav, target));
         self.seq += 1;
-        Some(SimStep { frames, vehicle })
+        Some(SimStep {
+            frames,
+            vehicle,
+            look_alikes,
+        })
     }
 
     fn frame(&mut self, state: &TrueState, uav: Uav, target: Point3<f64>) -> SimFrame {

@@ -19,6 +19,25 @@ pub struct EstimateRow {
     pub visible: bool,
     /// The filter's quality state (`geolocation::Quality` as its index).
     pub quality: u8,
+    /// An estimate of a look-alike: horizontally nearer a car coloured like the target
+    /// than the target, and more than [`LOOK_ALIKE_MIN_M`] from the target (truth).
+    #[serde(default)]
+    pub look_alike: bool,
+}
+
+/// An estimate this near the target is the target's, whatever else is near.
+pub const LOOK_ALIKE_MIN_M: f64 = 2.0;
+
+/// Whether an estimate `err` (estimate − target) off the target is one of the
+/// look-alikes at `look_alikes` (ENU, relative to the same origin as `target`).
+pub fn of_a_look_alike(
+    estimate: [f64; 3],
+    target: [f64; 3],
+    look_alikes: impl IntoIterator<Item = [f64; 3]>,
+) -> bool {
+    let h = |a: [f64; 3], b: [f64; 3]| (a[0] - b[0]).hypot(a[1] - b[1]);
+    let to_target = h(estimate, target);
+    to_target > LOOK_ALIKE_MIN_M && look_alikes.into_iter().any(|l| h(estimate, l) < to_target)
 }
 
 impl EstimateRow {
@@ -61,6 +80,13 @@ pub struct RunRecord {
     /// something else was taken for it.
     pub located_not_visible: usize,
     pub estimates: Vec<EstimateRow>,
+}
+
+impl RunRecord {
+    /// Estimates of a look-alike, from the first estimate.
+    pub fn look_alike_estimates(&self) -> usize {
+        self.estimates.iter().filter(|e| e.look_alike).count()
+    }
 }
 
 /// Mean absolute value.
@@ -172,6 +198,9 @@ pub struct SceneSummary {
     pub bias_mae_median: [f64; 2],
     pub located_pct: f64,
     pub located_not_visible: usize,
+    /// Estimates of a look-alike, from the first estimate, and the runs with any.
+    pub look_alike_estimates: usize,
+    pub look_alike_runs: usize,
     /// Pooled over runs and estimates, from the first estimate.
     pub within_h_acc_pct: f64,
     pub within_v_acc_pct: f64,
@@ -260,6 +289,8 @@ pub fn summarise(runs: &[RunRecord], warm_up_s: f64) -> SceneSummary {
             100.0 * located as f64 / visible as f64
         },
         located_not_visible: runs.iter().map(|r| r.located_not_visible).sum(),
+        look_alike_estimates: runs.iter().map(RunRecord::look_alike_estimates).sum(),
+        look_alike_runs: runs.iter().filter(|r| r.look_alike_estimates() > 0).count(),
         within_h_acc_pct: pct(all.iter().filter(|e| e.h_err() <= e.h_acc()).count()),
         within_v_acc_pct: pct(all.iter().filter(|e| e.err[2].abs() <= e.v_acc).count()),
         gross_pct: pct(all.iter().filter(|e| e.gross()).count()),
@@ -348,7 +379,26 @@ mod tests {
             bias_err_deg: [0.0, 0.0],
             visible: true,
             quality: 1,
+            look_alike: false,
         }
+    }
+
+    #[test]
+    fn an_estimate_nearer_a_look_alike_than_the_target_is_of_the_look_alike() {
+        let target = [0.0, 0.0, 13.5];
+        let look_alike = [20.0, 3.5, 13.5];
+        // On the target, or near it with the look-alike beside: the target's.
+        assert!(!of_a_look_alike([0.5, 0.5, 13.0], target, [look_alike]));
+        assert!(!of_a_look_alike(
+            [1.5, 1.0, 13.0],
+            target,
+            [[1.0, 3.5, 13.5]]
+        ));
+        // Nearer the look-alike and over 2 m from the target: the look-alike's.
+        assert!(of_a_look_alike([18.0, 3.0, 13.0], target, [look_alike]));
+        // Far from both, nearer the target: a bad estimate, not a look-alike's.
+        assert!(!of_a_look_alike([-9.0, 0.0, 13.0], target, [look_alike]));
+        assert!(!of_a_look_alike([18.0, 3.0, 13.0], target, []));
     }
 
     #[test]

@@ -11,7 +11,7 @@
 //! are kept in `OUT/monte-carlo/runs/` under a key of everything that decides them, so
 //! an interrupted report resumes where it stopped (`--fresh` ignores them).
 
-use super::mc_stats::{summarise, EstimateRow, RunRecord, SceneSummary};
+use super::mc_stats::{of_a_look_alike, summarise, EstimateRow, RunRecord, SceneSummary};
 use super::noise::estimator_for;
 use super::stream::{Lane, SceneStream};
 use super::suite::with_protocol;
@@ -31,7 +31,7 @@ pub const WARM_UP_S: f64 = 10.0;
 
 /// Bumped when the code changes what a run gives for the same inputs, so cached runs
 /// of an older build are not reused.
-const RUN_FORMAT: u32 = 5;
+const RUN_FORMAT: u32 = 6;
 
 /// The navigation-error models the Monte Carlo runs under.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize, clap::ValueEnum)]
@@ -139,6 +139,7 @@ pub fn run_one(
             let f = &pair.step.frames[0];
             (f.t_s, f.seq, f.target, pair.visible)
         };
+        let look_alikes = pair.step.look_alikes;
         let counted = t_s >= WARM_UP_S;
         let estimate = match step.default {
             Some(Ok(e)) => Some(e),
@@ -166,6 +167,7 @@ pub fn run_one(
             bias_err_deg: [0, 1].map(|i| wrap_angle(e.estimate.yaw_bias[i] - bias[i]).to_degrees()),
             visible,
             quality: e.quality as u8,
+            look_alike: of_a_look_alike([p.x, p.y, p.z], target, look_alikes.into_iter().flatten()),
         });
     }
     Ok(record)
@@ -183,8 +185,9 @@ fn run_key(config: &SimConfig, every: u64, matching: &MatchingConfig, crf: Optio
     // A run without a link keeps the key it had before links existed.
     let link = crf.map(|c| format!(" crf {c}")).unwrap_or_default();
     format!(
-        "{RUN_FORMAT} {every} {:?} {:?} {:?} {}{link}",
+        "{RUN_FORMAT} {every} {:?} {:?} {:?} {:?} {}{link}",
         config,
+        detection::ColourBlobConfig::default(),
         matching,
         estimator_for(config),
         env!("CARGO_PKG_VERSION")
@@ -367,5 +370,47 @@ mod tests {
         assert_eq!(signs.len(), 2);
         let gm = seeded(base, 1, NavModel::GaussMarkov);
         assert_ne!(gm.noise.model, NavErrorModel::White);
+    }
+
+    /// `suite_traffic`: a red car like the target overtakes it. Seeds where the chain
+    /// once estimated the look-alike, one per way it happened: 1, the target hidden
+    /// under the bridge with the look-alike the only red blob in view; 2, the camera
+    /// swinging by about the two cars' spacing while they are side by side; 3, the
+    /// look-alike 15 m behind the target as it slides under the bridge; 5, the target
+    /// hidden from one camera for over 2 s. None of these estimates a look-alike now
+    /// (seed 4, where both cars are under the bridge at once and the look-alike comes
+    /// out first in the target's track, still does: see docs/monte-carlo.md).
+    #[test]
+    fn the_traffic_scenes_look_alike_is_not_estimated() {
+        let base = Presets::builtin().get("suite_traffic").unwrap();
+        let seeds = [1, 2, 3, 5];
+        let runs: Vec<RunRecord> = std::thread::scope(|s| {
+            let handles: Vec<_> = seeds
+                .iter()
+                .map(|&seed| {
+                    let mut config = seeded(base.clone(), seed, NavModel::White);
+                    config.duration_s = 20.0;
+                    s.spawn(move || run_one(config, 2, &MatchingConfig::default(), None))
+                })
+                .collect();
+            handles
+                .into_iter()
+                .map(|h| h.join().expect("run thread").expect("run"))
+                .collect()
+        });
+        for (seed, run) in seeds.iter().zip(&runs) {
+            assert!(
+                run.estimates.len() > 100,
+                "seed {seed}: {} estimates",
+                run.estimates.len()
+            );
+            assert_eq!(run.look_alike_estimates(), 0, "seed {seed}");
+            assert!(
+                run.located_after_warm_up * 10 >= run.visible_after_warm_up * 9,
+                "seed {seed}: {} of {} located",
+                run.located_after_warm_up,
+                run.visible_after_warm_up
+            );
+        }
     }
 }
