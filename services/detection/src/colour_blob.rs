@@ -576,6 +576,23 @@ pub(crate) mod tests {
         m
     }
 
+    /// A 640×480 grey-green frame with 25×11 px cars of the target's colour centred
+    /// at `cars` (also the track tests').
+    pub(crate) fn street(cars: &[(i32, i32)]) -> cv::Mat {
+        let mut m = cv::Mat::new_rows_cols_with_default(
+            480,
+            640,
+            cv::CV_8UC3,
+            cv::Scalar::new(90.0, 110.0, 95.0, 0.0),
+        )
+        .unwrap();
+        let red = cv::Scalar::new(36.0, 28.0, 214.0, 0.0);
+        for &(x, y) in cars {
+            draw_rect(&mut m, cv::Rect::new(x - 12, y - 5, 25, 11), red);
+        }
+        m
+    }
+
     #[test]
     fn finds_a_red_roof_and_its_centre() {
         let mut d = ColourBlobDetector::new(ColourBlobConfig::default()).unwrap();
@@ -733,20 +750,6 @@ pub(crate) mod tests {
     fn landmarks_keep_the_target_when_the_camera_jumps_beside_a_look_alike() {
         // 640×480: the target and a look-alike one lane over; the camera then jumps so
         // that the look-alike lands nearer the target's last pixel than the target.
-        let red = cv::Scalar::new(36.0, 28.0, 214.0, 0.0);
-        let frame_of = |cars: &[(i32, i32)]| {
-            let mut m = cv::Mat::new_rows_cols_with_default(
-                480,
-                640,
-                cv::CV_8UC3,
-                cv::Scalar::new(90.0, 110.0, 95.0, 0.0),
-            )
-            .unwrap();
-            for &(x, y) in cars {
-                draw_rect(&mut m, cv::Rect::new(x - 12, y - 5, 25, 11), red);
-            }
-            m
-        };
         let hint = Some(TrackHint {
             centre: [300.0, 200.0],
             fresh: true,
@@ -754,7 +757,7 @@ pub(crate) mod tests {
         });
         // Before the jump: target at (300, 200), look-alike at (323, 241). After: both
         // moved by (-43, -3); the look-alike is now 41 px from (300, 200), the target 43.
-        let after = frame_of(&[(257, 197), (280, 238)]);
+        let after = street(&[(257, 197), (280, 238)]);
         for window_search in [true, false] {
             let mut d = ColourBlobDetector::new(ColourBlobConfig {
                 window_search,

@@ -205,26 +205,10 @@ impl TrackedDetector {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::colour_blob::tests::street;
 
     fn frame_with_red(x: i32, w: i32) -> cv::Mat {
         crate::colour_blob::tests::frame_with_rect(x, 50, w, 9, [36.0, 28.0, 214.0])
-    }
-
-    /// 640×480 with red cars (centre x, y).
-    fn street(cars: &[(i32, i32)]) -> cv::Mat {
-        let mut m = cv::Mat::new_rows_cols_with_default(
-            480,
-            640,
-            cv::CV_8UC3,
-            cv::Scalar::new(90.0, 110.0, 95.0, 0.0),
-        )
-        .unwrap();
-        for &(x, y) in cars {
-            let rect = cv::Rect::new(x - 12, y - 5, 25, 11);
-            let red = cv::Scalar::new(36.0, 28.0, 214.0, 0.0);
-            opencv::imgproc::rectangle(&mut m, rect, red, -1, opencv::imgproc::LINE_8, 0).unwrap();
-        }
-        m
     }
 
     #[test]

@@ -75,7 +75,7 @@ pub fn section(
         };
         let _ = writeln!(w, "### {title}\n");
         if nav == NavModel::GaussMarkov {
-            let _ = writeln!(w, "A GPS error that wanders with τ 120 s cannot be averaged away in a 20 s flight, so here only the calibration columns (inside h_acc / v_acc, gross, NEES, mean z err) have targets; the accuracy columns are reported beside the white model's.\n");
+            let _ = writeln!(w, "A GPS error that wanders with τ 120 s cannot be averaged away in a 20 s flight, so here only the calibration columns (inside h_acc / v_acc, gross, NEES, mean z err) have targets; the accuracy columns are reported beside the white model's. Estimates of a look-alike are not scored here: an estimate of the target is then often metres off, as far as a car one lane over.\n");
         }
         let _ = writeln!(w, "| scene | runs | located | MAE x / y / z | horiz. p90 / worst (seed) | bias MAE L / R (°) | inside h_acc / v_acc | gross | NEES (95 % region) | mean z err | trust s (worst) | first / h_acc ≤ 2 m (s) |");
         let _ = writeln!(
@@ -181,9 +181,12 @@ enum Targets {
     CalibrationOnly,
 }
 
-/// The located cell's note on look-alikes: nothing when none was estimated.
-fn look_alikes(s: &SceneSummary) -> String {
-    if s.look_alike_estimates == 0 {
+/// The located cell's note on look-alikes: nothing when none was estimated, or when
+/// the row is not scored for them (under correlated errors an estimate of the target
+/// is often metres off, as far as a car one lane over, so "nearer the look-alike" no
+/// longer tells whose estimate it is).
+fn look_alikes(s: &SceneSummary, scored: bool) -> String {
+    if !scored || s.look_alike_estimates == 0 {
         String::new()
     } else {
         format!(
@@ -212,9 +215,9 @@ fn row(scene: &str, s: &SceneSummary, targets: Targets) -> String {
         "| `{scene}` | {} | {:.1} %{} ({} not visible{}) | {mx:.2} / {my:.2} / {mz:.2}{} | {:.2} / {worst_h:.2} ({}){} | {:.2} / {:.2}{} | {:.0} / {:.0} %{} | {:.1} %{} | {:.1} ({:.1}–{:.1}){} | {:+.2}{} | {} ({}) | {} / {}{} |",
         s.runs,
         s.located_pct,
-        miss(s.located_pct < 90.0 || s.look_alike_estimates > 0),
+        miss(s.located_pct < 90.0 || (accuracy && s.look_alike_estimates > 0)),
         s.located_not_visible,
-        look_alikes(s),
+        look_alikes(s, accuracy),
         miss(accuracy && (mh > H_MAE_MAX_M || mz > Z_MAE_MAX_M)),
         s.mae_p90[3],
         s.worst.0,
