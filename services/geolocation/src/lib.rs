@@ -23,6 +23,7 @@ pub mod consistency;
 pub mod error;
 pub mod evaluation;
 pub mod ground_model;
+pub mod hypotheses;
 pub mod iteration;
 pub mod joint;
 pub mod observation;
@@ -41,7 +42,7 @@ pub use consistency::{
 };
 pub use error::EstimatorError;
 pub use iteration::{geolocate, Estimate};
-pub use observation::Observation;
+pub use observation::{ImageId, Observation};
 pub use one_shot::one_shot;
-pub use temporal::{ImageId, Quality, TemporalEstimate, TemporalEstimator};
+pub use temporal::{Quality, TemporalEstimate, TemporalEstimator};
 pub use temporal_snapshot::TemporalSnapshot;

@@ -5,6 +5,9 @@ use nalgebra::{Point3, Vector2};
 use shared_types::conventions::{Attitude, Intrinsics, Uav};
 use shared_types::messages::{ObservationEntry, PoseSample};
 
+/// Identifies an image across geolocations: (UAV, frame sequence number).
+pub type ImageId = (Uav, u64);
+
 /// One image `g_k`: the measured state γ of its UAV when it was taken and the pixel of
 /// the target's *current* position P in it (from detection for the current images,
 /// from corresponding-point matching for past ones).

@@ -29,12 +29,17 @@
 //! innovations stay large. Three such geolocations in a row re-open the bias and
 //! position covariances, and the filter re-converges.
 //!
+//! The start is a Gaussian sum over the two yaw biases (`hypotheses.rs`): 9 such
+//! filters until the data decide between them, then one.
+//!
 //! The filter never reads truth. Cost: ~0.2 ms per geolocation with 8 images (the
-//! state has 7 + 8 per keyframe + 12 entries during an update).
+//! state has 7 + 8 per keyframe + 12 entries during an update), times the hypotheses
+//! still open.
 
+use crate::hypotheses::{bias_grid, prune_and_merge, spread_about, weights, Hypothesis};
 use crate::joint::{reproject, Theta};
 use crate::{Estimate, EstimatorConfig, EstimatorError, Observation};
-use nalgebra::{DMatrix, DVector, Matrix4, Point3};
+use nalgebra::{DMatrix, DVector, Matrix4, Point3, SMatrix, SVector};
 use shared_types::conventions::Uav;
 
 /// χ²(2) at 99.9 %: a ray further than this from the prediction is rejected.
@@ -46,10 +51,9 @@ const DRIFT_ALPHA: f64 = 0.1;
 /// consistent filter) means a persistent offset: a bias step.
 const DRIFT_GATE: f64 = 18.4;
 /// Geolocations after a re-opening before another can happen.
-const REOPEN_HOLD: usize = 20;
+pub(crate) const REOPEN_HOLD: usize = 20;
 
-/// Identifies an image across geolocations: (UAV, frame sequence number).
-pub type ImageId = (Uav, u64);
+pub use crate::observation::ImageId;
 
 /// How far an estimate can be trusted (issue #23): `track.csv`'s `quality`, MCAP's
 /// and the report's. Its accuracy is always the filter's covariance; this says why it
@@ -129,6 +133,12 @@ pub struct TemporalConfig {
     /// ... and the part a keyframe keeps across its reuses (its E estimates resemble
     /// each other), carried as two states per keyframe.
     pub transfer_offset_sigma_px: f64,
+    /// Bias hypotheses per UAV at the start (`hypotheses.rs`): the start's N(0,
+    /// `initial_bias_sigma_deg`²) split into this many per axis (3: 9 filters at −30°,
+    /// 0°, +30° with σ 15°), weighed by their innovations, merged once they agree. 1 is
+    /// one filter, as before issue #23's Monte Carlo found it sliding along a valley of
+    /// near-equal fits 250 m up.
+    pub bias_hypotheses: usize,
 }
 
 impl Default for TemporalConfig {
@@ -144,6 +154,7 @@ impl Default for TemporalConfig {
             reopen_bias_sigma_deg: 15.0,
             transfer_sigma_px: 4.0,
             transfer_offset_sigma_px: 6.0,
+            bias_hypotheses: 3,
         }
     }
 }
@@ -162,7 +173,12 @@ impl TemporalConfig {
             self.transfer_sigma_px,
             self.transfer_offset_sigma_px,
         ];
-        if all.iter().all(|v| v.is_finite() && *v > 0.0) {
+        if !(1..=7).contains(&self.bias_hypotheses) {
+            Err(EstimatorError::Config(format!(
+                "[estimator.temporal] bias_hypotheses must be 1–7 per UAV, got {}",
+                self.bias_hypotheses
+            )))
+        } else if all.iter().all(|v| v.is_finite() && *v > 0.0) {
             Ok(())
         } else {
             Err(EstimatorError::Config(format!(
@@ -176,14 +192,9 @@ impl TemporalConfig {
 #[derive(Debug, Clone)]
 pub struct TemporalEstimator {
     pub(crate) config: EstimatorConfig,
-    /// (time, state, covariance): 7 core states then 8 per keyframe slot.
-    pub(crate) state: Option<(f64, DVector<f64>, DMatrix<f64>)>,
-    pub(crate) slots: Vec<ImageId>,
-    /// Running mean of each UAV's whitened current-ray innovation (zero-mean when the
-    /// filter's model holds).
-    pub(crate) drift: [nalgebra::Vector2<f64>; 2],
-    /// Geolocations since the last re-opening.
-    pub(crate) since_reopen: usize,
+    /// The hypotheses (`hypotheses.rs`), leader first: none before the start, several
+    /// while the start's bias hypotheses are open, then one.
+    pub(crate) bank: Vec<Hypothesis>,
     /// Before the start: the last plausible window estimates (t, position).
     pub(crate) start_candidates: Vec<(f64, Point3<f64>)>,
 }
@@ -253,21 +264,20 @@ impl TemporalEstimator {
         config.temporal.validate()?;
         Ok(Self {
             config,
-            state: None,
-            slots: Vec::new(),
-            drift: [nalgebra::Vector2::zeros(); 2],
-            since_reopen: REOPEN_HOLD,
+            bank: Vec::new(),
             start_candidates: Vec::new(),
         })
     }
 
     /// Forgets everything (a new stream, or time went backwards).
     pub fn reset(&mut self) {
-        self.state = None;
-        self.slots.clear();
-        self.drift = [nalgebra::Vector2::zeros(); 2];
-        self.since_reopen = REOPEN_HOLD;
+        self.bank.clear();
         self.start_candidates.clear();
+    }
+
+    /// Bias hypotheses still open (1 once the start's have been decided, 0 before it).
+    pub fn hypotheses(&self) -> usize {
+        self.bank.len()
     }
 
     /// Whether the filter may start from `window` at `t_s`: the window estimate must be
@@ -450,46 +460,180 @@ impl TemporalEstimator {
         for (i, (_, o)) in past.iter().enumerate() {
             o.validate(i + 2)?;
         }
-        if matches!(self.state, Some((t0, _, _)) if t_s < t0) {
+        if self.bank.iter().any(|h| t_s < h.state.0) {
             self.reset();
         }
+        if self.bank.is_empty() {
+            // Start from the window estimate (never from truth), once several agree.
+            let w = window.ok_or(EstimatorError::TooFewImages {
+                needed: 3,
+                left: 1,
+                right: 1,
+            })?;
+            self.agree_on_start(t_s, current, w)?;
+            self.start_candidates.clear();
+            self.bank = self.start(t_s, current, w);
+        }
+        let mut kept = Vec::with_capacity(self.bank.len());
+        let mut outs = Vec::with_capacity(self.bank.len());
+        let mut failure = None;
+        for mut h in std::mem::take(&mut self.bank) {
+            match self.update_one(&mut h, t_s, current, past) {
+                Ok((out, log_likelihood, current_taken)) => {
+                    h.log_weight += log_likelihood;
+                    outs.push((out, current_taken));
+                    kept.push(h);
+                }
+                Err(e) => failure = Some(e),
+            }
+        }
+        if kept.is_empty() {
+            self.reset();
+            return Err(failure.unwrap_or(EstimatorError::NonFiniteResult {
+                what: "temporal state",
+            }));
+        }
+        let out = self.mixture(&kept, outs);
+        prune_and_merge(&mut kept, CORE);
+        self.bank = kept;
+        Ok(out)
+    }
+
+    /// The start's hypotheses (`hypotheses.rs`): each starts where the current pair's
+    /// rays meet under its own biases (the window estimate's position when they do not
+    /// meet in front of both cameras), with the start's position and velocity σ's.
+    fn start(&self, t_s: f64, current: [&Observation; 2], window: &Estimate) -> Vec<Hypothesis> {
         let tc = self.config.temporal;
-        let (t0, mut s, mut p) = match self.state.take() {
-            Some(x) => x,
-            None => {
-                // Start from the window estimate (never from truth), once several agree.
-                let w = window.ok_or(EstimatorError::TooFewImages {
-                    needed: 3,
-                    left: 1,
-                    right: 1,
-                })?;
-                self.agree_on_start(t_s, current, w)?;
-                self.start_candidates.clear();
-                self.slots.clear();
+        let (sp, sv) = (tc.initial_position_sigma_m, tc.initial_velocity_sigma_mps);
+        let min_angle = self.config.min_ray_angle_deg.to_radians();
+        bias_grid(tc.bias_hypotheses, tc.initial_bias_sigma_deg.to_radians())
+            .into_iter()
+            .map(|g| {
+                let ray = |o: &Observation| {
+                    crate::ground_model::PreparedRay::new(o).direction(o.corrected_yaw(g.mean))
+                };
+                let position = crate::altitude::ray_pair_midpoint(
+                    current[0].position,
+                    ray(current[0]),
+                    current[1].position,
+                    ray(current[1]),
+                    min_angle,
+                )
+                .map_or(window.position, |m| m.midpoint);
                 let mut s = DVector::zeros(self.core_len());
-                s[0] = w.position.x;
-                s[1] = w.position.y;
-                s[2] = w.position.z;
-                let (sp, sv, sb) = (
-                    tc.initial_position_sigma_m,
-                    tc.initial_velocity_sigma_mps,
-                    tc.initial_bias_sigma_deg.to_radians(),
-                );
+                s[0] = position.x;
+                s[1] = position.y;
+                s[2] = position.z;
+                s[5] = g.mean[0];
+                s[6] = g.mean[1];
                 let mut p = DMatrix::zeros(s.len(), s.len());
-                for (i, v) in [sp, sp, sp, sv, sv, sb, sb].into_iter().enumerate() {
+                for (i, v) in [sp, sp, sp, sv, sv, g.sigma, g.sigma]
+                    .into_iter()
+                    .enumerate()
+                {
                     p[(i, i)] = v * v;
                 }
                 for uav in [Uav::Left, Uav::Right] {
-                    let Some(g) = self.gm_block(uav) else {
+                    let Some(b) = self.gm_block(uav) else {
                         continue;
                     };
                     for (k, (sigma, _)) in self.correlated(uav).into_iter().enumerate() {
-                        p[(g + k, g + k)] = sigma * sigma;
+                        p[(b + k, b + k)] = sigma * sigma;
                     }
                 }
-                (t_s, s, p)
-            }
+                Hypothesis {
+                    log_weight: g.log_weight,
+                    state: (t_s, s, p),
+                    slots: Vec::new(),
+                    drift: [nalgebra::Vector2::zeros(); 2],
+                    since_reopen: REOPEN_HOLD,
+                }
+            })
+            .collect()
+    }
+
+    /// The estimate of the bank: the leader's (the heaviest hypothesis), its covariance
+    /// the whole mixture's spread about it. `converging` while the mixture's bias σ is
+    /// above `converged_bias_sigma_deg`.
+    fn mixture(
+        &self,
+        bank: &[Hypothesis],
+        outs: Vec<(TemporalEstimate, bool)>,
+    ) -> TemporalEstimate {
+        let w = weights(&bank.iter().map(|h| h.log_weight).collect::<Vec<_>>());
+        let leader = (0..w.len()).fold(0, |best, i| if w[i] > w[best] { i } else { best });
+        let members4: Vec<(f64, SVector<f64, 4>, SMatrix<f64, 4, 4>)> = outs
+            .iter()
+            .zip(&w)
+            .map(|((o, _), &wi)| {
+                let e = &o.estimate;
+                let mu = SVector::<f64, 4>::new(
+                    e.position.x,
+                    e.position.y,
+                    e.yaw_bias[0],
+                    e.yaw_bias[1],
+                );
+                (wi, mu, e.covariance)
+            })
+            .collect();
+        let members1: Vec<(f64, SVector<f64, 1>, SMatrix<f64, 1, 1>)> = outs
+            .iter()
+            .zip(&w)
+            .map(|((o, _), &wi)| {
+                let e = &o.estimate;
+                let v = e.altitude_std_error_m.powi(2);
+                (
+                    wi,
+                    SVector::<f64, 1>::new(e.position.z),
+                    SMatrix::<f64, 1, 1>::new(v),
+                )
+            })
+            .collect();
+        let velocity: Vec<(f64, SVector<f64, 2>, SMatrix<f64, 2, 2>)> = outs
+            .iter()
+            .zip(&w)
+            .map(|((o, _), &wi)| {
+                let s = o.velocity_std_mps;
+                (
+                    wi,
+                    SVector::<f64, 2>::from(o.velocity),
+                    SMatrix::<f64, 2, 2>::from_diagonal(&SVector::<f64, 2>::new(
+                        s[0] * s[0],
+                        s[1] * s[1],
+                    )),
+                )
+            })
+            .collect();
+        let (mut out, current_taken) = outs[leader].clone();
+        out.estimate.covariance = spread_about(&members4[leader].1, &members4);
+        out.estimate.altitude_std_error_m = spread_about(&members1[leader].1, &members1)[(0, 0)]
+            .max(0.0)
+            .sqrt();
+        let v = spread_about(&velocity[leader].1, &velocity);
+        out.velocity_std_mps = [v[(0, 0)].max(0.0).sqrt(), v[(1, 1)].max(0.0).sqrt()];
+        let c = &out.estimate.covariance;
+        let limit = self.config.temporal.converged_bias_sigma_deg.to_radians();
+        let bias_known = (2..4).all(|i| c[(i, i)].max(0.0).sqrt() <= limit);
+        out.quality = match (bias_known, current_taken) {
+            (false, _) => Quality::Converging,
+            (true, true) => Quality::Tracking,
+            (true, false) => Quality::Coasting,
         };
+        out
+    }
+
+    /// One hypothesis's update: its estimate, the log-likelihood of this geolocation's
+    /// rays under its prediction (Gaussian over the accepted rays, each gated-out ray
+    /// counted at the gate: a robust likelihood) and whether a current ray was taken.
+    fn update_one(
+        &self,
+        hypothesis: &mut Hypothesis,
+        t_s: f64,
+        current: [&Observation; 2],
+        past: &[(ImageId, Observation)],
+    ) -> Result<(TemporalEstimate, f64, bool), EstimatorError> {
+        let tc = self.config.temporal;
+        let (t0, mut s, mut p) = hypothesis.state.clone();
         // Predict the core: constant velocity (white acceleration), random walks for z
         // and the biases. Keyframe pose errors do not change.
         let dt = t_s - t0;
@@ -533,7 +677,8 @@ impl TemporalEstimator {
         let core = self.core_len();
         let keep: Vec<usize> = (0..core)
             .chain(
-                self.slots
+                hypothesis
+                    .slots
                     .iter()
                     .enumerate()
                     .filter(|(_, id)| ids.contains(id))
@@ -543,10 +688,10 @@ impl TemporalEstimator {
         if keep.len() != s.len() {
             s = DVector::from_iterator(keep.len(), keep.iter().map(|&i| s[i]));
             p = DMatrix::from_fn(keep.len(), keep.len(), |r, c| p[(keep[r], keep[c])]);
-            self.slots.retain(|id| ids.contains(id));
+            hypothesis.slots.retain(|id| ids.contains(id));
         }
         for (id, _) in past {
-            if !self.slots.contains(id) {
+            if !hypothesis.slots.contains(id) {
                 let sig = self.pose_sigmas(id.0);
                 let n = s.len();
                 s = s.resize_vertically(n + SLOT, 0.0);
@@ -574,7 +719,7 @@ impl TemporalEstimator {
                 let offset = tc.transfer_offset_sigma_px.powi(2);
                 p[(n + 6, n + 6)] = offset;
                 p[(n + 7, n + 7)] = offset;
-                self.slots.push(*id);
+                hypothesis.slots.push(*id);
             }
         }
         // The current pair's pose errors: six states per image for this update only
@@ -601,7 +746,7 @@ impl TemporalEstimator {
             });
         }
         for (id, o) in past {
-            let Some(k) = self.slots.iter().position(|x| x == id) else {
+            let Some(k) = hypothesis.slots.iter().position(|x| x == id) else {
                 continue;
             };
             rays.push(Ray {
@@ -615,6 +760,8 @@ impl TemporalEstimator {
 
         // Gate at the prediction; follow each UAV's current-ray innovation over time.
         let mut accepted = Vec::new();
+        // ln det of each ray's innovation covariance, for the likelihood of those gated out.
+        let mut log_det = vec![0.0; rays.len()];
         for (i, ray) in rays.iter().enumerate() {
             let Some((r, c, h)) = self.linearise(ray, &s) else {
                 continue;
@@ -629,23 +776,24 @@ impl TemporalEstimator {
                 .solve_lower_triangular(&rv)
                 .unwrap_or_else(|| rv.clone());
             let d2 = whitened.norm_squared();
+            log_det[i] = 2.0 * chol.l().diagonal().iter().map(|v| v.ln()).sum::<f64>();
             if i < 2 {
                 let w2 = nalgebra::Vector2::new(whitened[0], whitened[1]);
                 let uav = ray.obs.uav.index();
-                self.drift[uav] += DRIFT_ALPHA * (w2 - self.drift[uav]);
+                hypothesis.drift[uav] += DRIFT_ALPHA * (w2 - hypothesis.drift[uav]);
             }
             if d2 <= GATE {
                 accepted.push(i);
             }
         }
-        self.since_reopen += 1;
+        hypothesis.since_reopen += 1;
         let drift_var = DRIFT_ALPHA / (2.0 - DRIFT_ALPHA);
-        let drifting = self
+        let drifting = hypothesis
             .drift
             .iter()
             .any(|m| m.norm_squared() / drift_var > DRIFT_GATE);
         let mut reopened = false;
-        if drifting && self.since_reopen >= REOPEN_HOLD {
+        if drifting && hypothesis.since_reopen >= REOPEN_HOLD {
             // A bias step: forget what we believed about the biases and the position.
             let sb = tc.reopen_bias_sigma_deg.to_radians().powi(2);
             let sp = tc.initial_position_sigma_m.powi(2);
@@ -656,11 +804,11 @@ impl TemporalEstimator {
             }
             // Keyframes taken before the step carry the old bias: let their yaw errors
             // take up the difference instead of pulling the new bias back.
-            for k in 0..self.slots.len() {
+            for k in 0..hypothesis.slots.len() {
                 p[(core + SLOT * k + 3, core + SLOT * k + 3)] += sb;
             }
-            self.drift = [nalgebra::Vector2::zeros(); 2];
-            self.since_reopen = 0;
+            hypothesis.drift = [nalgebra::Vector2::zeros(); 2];
+            hypothesis.since_reopen = 0;
             reopened = true;
             // Against the widened prediction every ray of this geolocation is plausible.
             accepted = (0..rays.len()).collect();
@@ -671,7 +819,8 @@ impl TemporalEstimator {
         let s_prior = s.clone();
         let mut s_iter = s.clone();
         let mut gain_h = None;
-        for _ in 0..3 {
+        let mut log_likelihood = 0.0;
+        for iteration in 0..3 {
             let m = accepted.len() * 2;
             if m == 0 {
                 break;
@@ -695,6 +844,14 @@ impl TemporalEstimator {
                 break;
             }
             let sm = &h * &p * h.transpose() + rc;
+            if iteration == 0 {
+                // At the prediction (s_iter = prior): −½ (rᵀ S⁻¹ r + ln det S).
+                let Some(chol) = sm.clone().cholesky() else {
+                    break;
+                };
+                let ln_det = 2.0 * chol.l().diagonal().iter().map(|v| v.ln()).sum::<f64>();
+                log_likelihood = -0.5 * (r.dot(&chol.solve(&r)) + ln_det);
+            }
             let Some(sinv) = sm.try_inverse() else { break };
             let k = &p * h.transpose() * sinv;
             s_iter = &s_prior - &k * r;
@@ -710,7 +867,6 @@ impl TemporalEstimator {
         let s = s.rows(0, kept).into_owned();
         let p = p.view((0, 0), (kept, kept)).into_owned();
         if !s.iter().all(|v| v.is_finite()) || !p.iter().all(|v| v.is_finite()) {
-            self.reset();
             return Err(EstimatorError::NonFiniteResult {
                 what: "temporal state",
             });
@@ -742,8 +898,13 @@ impl TemporalEstimator {
             reopened,
             quality,
         };
-        self.state = Some((t_s, s, p));
-        Ok(out)
+        for (i, ld) in log_det.iter().enumerate() {
+            if !accepted.contains(&i) {
+                log_likelihood -= 0.5 * (GATE + ld);
+            }
+        }
+        hypothesis.state = (t_s, s, p);
+        Ok((out, log_likelihood, current_taken))
     }
 }
 
@@ -752,6 +913,7 @@ mod tests {
     use super::*;
     use crate::synthetic::SyntheticScenario;
     use rand::SeedableRng;
+    use shared_types::conventions::Intrinsics;
     use shared_types::nav_noise::{BiasModel, NavNoise};
 
     /// Runs the filter over a synthetic flight; returns (t, estimate, truth target, true biases).
@@ -961,7 +1123,17 @@ mod tests {
         }
         let (k, e) = started.expect("started");
         assert_eq!(k, 2, "the third agreeing window starts it");
-        assert!((e.estimate.position - tr.target).norm() < 30.0);
+        // With the current pair alone the biases are not observable: the start's
+        // hypotheses stay open and its stated accuracy covers the target.
+        let d = e.estimate.position - tr.target;
+        let c = e.estimate.covariance;
+        let sigma = (c[(0, 0)] + c[(1, 1)] + e.estimate.altitude_std_error_m.powi(2)).sqrt();
+        assert!(
+            d.norm() < 3.0 * sigma,
+            "{:.1} m off, σ {sigma:.1} m",
+            d.norm()
+        );
+        assert_eq!(e.quality, Quality::Converging);
     }
 
     /// Issue #23 item 8: on exact synthetic rays with the noise the filter is told (the
@@ -1141,5 +1313,197 @@ mod tests {
         assert!(f.update(f64::NAN, [&o[0], &o[1]], &[], None).is_err());
         // Earlier time: a new stream; without a window estimate it cannot restart.
         assert!(f.update(5.0, [&o[0], &o[1]], &[], None).is_err());
+    }
+    /// (t, estimate, truth target, true biases) per estimate.
+    type Flight = Vec<(f64, TemporalEstimate, Point3<f64>, [f64; 2])>;
+
+    /// A flight as the chain gives it: keyframes picked by the baseline constraint
+    /// (`keyframe_spacing_m` of true travel, a ring of 6, the newest 3 per UAV in each
+    /// set) keep the pose noise drawn when they were taken, as long as they are reused;
+    /// every pixel is the exact projection of the target's current position. The chain
+    /// matches nothing before each ring holds 3, so neither does this.
+    /// (`fly` draws new noise for every past image of every trial: no reuse.)
+    fn fly_keyframes(
+        sc: &SyntheticScenario,
+        config: EstimatorConfig,
+        seconds: f64,
+        seed: u64,
+    ) -> (Flight, usize) {
+        use rand_distr::{Distribution, Normal};
+        use shared_types::conventions::{camera_to_world, Attitude};
+        struct Keyframe {
+            id: u64,
+            true_pose: (Point3<f64>, Attitude),
+            measured: (Point3<f64>, Attitude),
+        }
+        let mut rng = rand::rngs::StdRng::seed_from_u64(seed);
+        let n = sc.noise;
+        let pos = n.sigma_position_m.map(|s| Normal::new(0.0, s).unwrap());
+        let att = n
+            .sigma_attitude_deg
+            .map(|s| Normal::new(0.0, s.to_radians()).unwrap());
+        let project = |(p, a): (Point3<f64>, Attitude), target: Point3<f64>| {
+            sc.intrinsics
+                .project(camera_to_world(a).transpose() * (target - p))
+                .filter(|px| {
+                    (0.0..sc.image_width as f64).contains(&px.x)
+                        && (0.0..sc.image_height as f64).contains(&px.y)
+                })
+        };
+        let mut filter = TemporalEstimator::new(config).unwrap();
+        let mut rings: [Vec<Keyframe>; 2] = [Vec::new(), Vec::new()];
+        let mut out = Vec::new();
+        let mut id = 0u64;
+        let mut t = 2.0;
+        while t < seconds {
+            let target = sc.target_at(t);
+            let mut current = Vec::new();
+            for uav in [Uav::Left, Uav::Right] {
+                id += 1;
+                let (p, a) = sc.uav_at(uav, t);
+                let bias = sc.bias.at(t)[uav.index()];
+                let measured = (
+                    p + nalgebra::Vector3::from_fn(|i, _| pos[i].sample(&mut rng)),
+                    Attitude::new(
+                        a.yaw + bias + att[0].sample(&mut rng),
+                        a.pitch + att[1].sample(&mut rng),
+                        a.roll + att[2].sample(&mut rng),
+                    ),
+                );
+                if let Some(pixel) = project((p, a), target) {
+                    current.push(Observation {
+                        uav,
+                        position: measured.0,
+                        attitude: measured.1,
+                        pixel,
+                        intrinsics: sc.intrinsics,
+                    });
+                }
+                let ring = &mut rings[uav.index()];
+                if ring
+                    .last()
+                    .is_none_or(|k| (k.true_pose.0 - p).norm() >= sc.keyframe_spacing_m)
+                {
+                    ring.push(Keyframe {
+                        id,
+                        true_pose: (p, a),
+                        measured,
+                    });
+                    if ring.len() > 6 {
+                        ring.remove(0);
+                    }
+                }
+            }
+            let mut past = Vec::new();
+            for (uav, ring) in [Uav::Left, Uav::Right].into_iter().zip(&rings) {
+                // The chain admits after matching: not the current frame itself.
+                for k in ring.iter().rev().filter(|k| k.id < id - 1).take(3) {
+                    if let Some(pixel) = project(k.true_pose, target) {
+                        let (position, attitude) = k.measured;
+                        let o = Observation {
+                            uav,
+                            position,
+                            attitude,
+                            pixel,
+                            intrinsics: sc.intrinsics,
+                        };
+                        past.push(((uav, k.id), o));
+                    }
+                }
+            }
+            if current.len() == 2 && past.len() == 6 {
+                let mut all = current.clone();
+                all.extend(past.iter().map(|(_, o)| *o));
+                let window = crate::geolocate(&all, &config).ok();
+                if let Ok(e) = filter.update(t, [&current[0], &current[1]], &past, window.as_ref())
+                {
+                    out.push((t, e, target, sc.bias.at(t)));
+                }
+            }
+            t += 1.0 / 15.0;
+        }
+        (out, filter.hypotheses())
+    }
+
+    /// (mean NEES over x, y and z; share of estimates beyond 3σ) of `runs` flights.
+    fn calibration_with_keyframes(
+        sc: &SyntheticScenario,
+        config: EstimatorConfig,
+        runs: u64,
+    ) -> (f64, f64) {
+        let (mut sum, mut n, mut gross) = (0.0, 0usize, 0usize);
+        for seed in 0..runs {
+            let (run, open) = fly_keyframes(sc, config, 20.0, 500 + seed);
+            // The start's hypotheses have been decided (merged or dropped) by 20 s.
+            assert_eq!(open, 1, "seed {seed}: {open} hypotheses still open");
+            for (_, e, truth, _) in run {
+                let d = e.estimate.position - truth;
+                let c = e.estimate.covariance.fixed_view::<2, 2>(0, 0).into_owned();
+                let Some(ci) = c.try_inverse() else {
+                    panic!("singular horizontal covariance {c}")
+                };
+                let h = nalgebra::Vector2::new(d.x, d.y);
+                let v = e.estimate.altitude_std_error_m;
+                sum += (h.transpose() * ci * h)[(0, 0)] + (d.z / v).powi(2);
+                let h_acc = (c[(0, 0)] + c[(1, 1)]).sqrt();
+                gross += usize::from(h.norm() > 3.0 * h_acc || d.z.abs() > 3.0 * v);
+                n += 1;
+            }
+        }
+        assert!(n as u64 > 150 * runs, "{n} estimates");
+        (sum / n as f64, gross as f64 / n as f64)
+    }
+
+    /// Issue #23: the Monte Carlo's `suite_high_hd` (250 m up, 120 m apart, 1280×720)
+    /// was 13 % beyond 3σ, and its seed 1 17 m low all run. Exact rays with keyframes
+    /// reused as the chain reuses them show the same without any image: one filter
+    /// started at one point slides along the valley of near-equal fits and claims a few
+    /// metres 30–140 m off (24 runs: NEES 133, 17 % beyond 3σ; 100 m up: 6.7, 4.5 %).
+    /// With the start's bias hypotheses (`hypotheses.rs`) both are calibrated. χ²(72)
+    /// at 2.5 % and 97.5 %: 51.0 and 96.6, over 24 runs.
+    #[test]
+    fn nees_is_within_its_chi2_region_with_keyframes_reused_100_and_250_m_up() {
+        let default = SyntheticScenario {
+            keyframe_spacing_m: 8.0,
+            ..Default::default()
+        };
+        let high = SyntheticScenario {
+            altitude_agl_m: 250.0,
+            uav_separation_m: 120.0,
+            speed_mps: 11.0,
+            turn_rate_deg_s: 0.0,
+            image_width: 1280,
+            image_height: 720,
+            intrinsics: Intrinsics::new(1108.5, 1108.5, 639.5, 359.5),
+            ..default
+        };
+        let runs = 24;
+        let region = (51.0 / runs as f64, 96.6 / runs as f64);
+        for (label, sc) in [("100 m", default), ("250 m", high)] {
+            let (nees, gross) = calibration_with_keyframes(&sc, EstimatorConfig::default(), runs);
+            eprintln!(
+                "{label}: mean NEES {nees:.2} (region {:.2}–{:.2}), beyond 3σ {:.1} %",
+                region.0,
+                region.1,
+                100.0 * gross
+            );
+            assert!(
+                (region.0..=region.1).contains(&nees),
+                "{label}: mean NEES {nees:.2}"
+            );
+            assert!(gross <= 0.01, "{label}: {:.1} % beyond 3σ", 100.0 * gross);
+        }
+        // One filter (the hypotheses off) on the 250 m flight: the failure above.
+        let mut one = EstimatorConfig::default();
+        one.temporal.bias_hypotheses = 1;
+        let (nees, gross) = calibration_with_keyframes(&high, one, runs);
+        eprintln!(
+            "250 m, one filter: mean NEES {nees:.2}, beyond 3σ {:.1} %",
+            100.0 * gross
+        );
+        assert!(
+            nees > 2.0 * region.1 && gross > 0.05,
+            "{nees:.2}, {gross:.3}"
+        );
     }
 }

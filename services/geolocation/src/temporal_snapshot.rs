@@ -7,8 +7,13 @@
 //! filter starts fresh. After a restore, the first update predicts across the time the
 //! service was down (the constant-velocity model and the bias random walk of
 //! `temporal.rs`), so the covariance, hence h_acc, grows with what was lost.
+//!
+//! While the start's bias hypotheses are still open (`hypotheses.rs`, the first
+//! seconds of a track) the snapshot holds the leading one only: a service restarted
+//! then resumes that hypothesis alone, with its own covariance.
 
-use crate::temporal::{ImageId, TemporalEstimator, SLOT};
+use crate::hypotheses::Hypothesis;
+use crate::temporal::{ImageId, TemporalEstimator, REOPEN_HOLD, SLOT};
 use crate::{EstimatorConfig, EstimatorError};
 use nalgebra::{DMatrix, DVector, Vector2};
 use shared_types::conventions::Uav;
@@ -37,19 +42,28 @@ fn invalid(why: &str) -> EstimatorError {
 
 impl TemporalEstimator {
     pub fn snapshot(&self) -> TemporalSnapshot {
+        let Some(leader) = self.bank.first() else {
+            return TemporalSnapshot {
+                core: None,
+                slots: Vec::new(),
+                drift: [[0.0; 2]; 2],
+                since_reopen: REOPEN_HOLD as u64,
+            };
+        };
+        let (t, s, p) = &leader.state;
         TemporalSnapshot {
-            core: self.state.as_ref().map(|(t, s, p)| FilterState {
+            core: Some(FilterState {
                 t_s: *t,
                 state: s.iter().copied().collect(),
                 covariance: p.as_slice().to_vec(),
             }),
-            slots: self
+            slots: leader
                 .slots
                 .iter()
                 .map(|(uav, seq)| (uav.index() as u8, *seq))
                 .collect(),
-            drift: self.drift.map(|d| [d.x, d.y]),
-            since_reopen: self.since_reopen as u64,
+            drift: leader.drift.map(|d| [d.x, d.y]),
+            since_reopen: leader.since_reopen as u64,
         }
     }
 
@@ -94,16 +108,19 @@ impl TemporalEstimator {
                     "the covariance is not symmetric with a non-negative diagonal",
                 ));
             }
-            filter.state = Some((core.t_s, DVector::from_column_slice(&core.state), p));
+            if !snapshot.drift.iter().flatten().all(|v| v.is_finite()) {
+                return Err(invalid("the drift monitor is not finite"));
+            }
+            filter.bank = vec![Hypothesis {
+                log_weight: 0.0,
+                state: (core.t_s, DVector::from_column_slice(&core.state), p),
+                slots,
+                drift: snapshot.drift.map(|d| Vector2::new(d[0], d[1])),
+                since_reopen: usize::try_from(snapshot.since_reopen).unwrap_or(usize::MAX),
+            }];
         } else if !slots.is_empty() {
             return Err(invalid("keyframe slots without a state"));
         }
-        if !snapshot.drift.iter().flatten().all(|v| v.is_finite()) {
-            return Err(invalid("the drift monitor is not finite"));
-        }
-        filter.slots = slots;
-        filter.drift = snapshot.drift.map(|d| Vector2::new(d[0], d[1]));
-        filter.since_reopen = usize::try_from(snapshot.since_reopen).unwrap_or(usize::MAX);
         Ok(filter)
     }
 }
