@@ -20,6 +20,10 @@
 //! the Gaussian-sum filter of Alspach and Sorenson (1972), used only where the
 //! posterior is far from one Gaussian.
 //!
+//! `[estimator.temporal] bias_hypotheses` sets the grid (1, the default, is one
+//! filter: detection gates only with `tracking` estimates, and on `suite_traffic` the
+//! longer `converging` start left the detector to take a look-alike; docs/temporal.md).
+//!
 //! Pure functions over plain data (nalgebra); `temporal.rs` runs the filters.
 
 use crate::observation::ImageId;
