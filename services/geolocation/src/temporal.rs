@@ -262,6 +262,25 @@ fn ray_residual(
     Some(reproject(o, pos, att, &p)? - o.pixel + nalgebra::Vector2::new(du, dv))
 }
 
+/// The mixture's second moment about the leader of one quantity, whose mean and
+/// covariance `moments` takes from each hypothesis's estimate.
+fn spread<const N: usize>(
+    weights: &[f64],
+    leader: usize,
+    outs: &[(TemporalEstimate, bool)],
+    moments: impl Fn(&TemporalEstimate) -> (SVector<f64, N>, SMatrix<f64, N, N>),
+) -> SMatrix<f64, N, N> {
+    let members: Vec<_> = outs
+        .iter()
+        .zip(weights)
+        .map(|((o, _), &w)| {
+            let (mean, covariance) = moments(o);
+            (w, mean, covariance)
+        })
+        .collect();
+    spread_about(&members[leader].1, &members)
+}
+
 impl TemporalEstimator {
     pub fn new(config: EstimatorConfig) -> Result<Self, EstimatorError> {
         config.validate()?;
@@ -572,54 +591,28 @@ impl TemporalEstimator {
         }
         let w = weights(&bank.iter().map(|h| h.log_weight).collect::<Vec<_>>());
         let leader = (0..w.len()).fold(0, |best, i| if w[i] > w[best] { i } else { best });
-        let members4: Vec<(f64, SVector<f64, 4>, SMatrix<f64, 4, 4>)> = outs
-            .iter()
-            .zip(&w)
-            .map(|((o, _), &wi)| {
-                let e = &o.estimate;
-                let mu = SVector::<f64, 4>::new(
-                    e.position.x,
-                    e.position.y,
-                    e.yaw_bias[0],
-                    e.yaw_bias[1],
-                );
-                (wi, mu, e.covariance)
-            })
-            .collect();
-        let members1: Vec<(f64, SVector<f64, 1>, SMatrix<f64, 1, 1>)> = outs
-            .iter()
-            .zip(&w)
-            .map(|((o, _), &wi)| {
-                let e = &o.estimate;
-                let v = e.altitude_std_error_m.powi(2);
-                (
-                    wi,
-                    SVector::<f64, 1>::new(e.position.z),
-                    SMatrix::<f64, 1, 1>::new(v),
-                )
-            })
-            .collect();
-        let velocity: Vec<(f64, SVector<f64, 2>, SMatrix<f64, 2, 2>)> = outs
-            .iter()
-            .zip(&w)
-            .map(|((o, _), &wi)| {
-                let s = o.velocity_std_mps;
-                (
-                    wi,
-                    SVector::<f64, 2>::from(o.velocity),
-                    SMatrix::<f64, 2, 2>::from_diagonal(&SVector::<f64, 2>::new(
-                        s[0] * s[0],
-                        s[1] * s[1],
-                    )),
-                )
-            })
-            .collect();
         let (mut out, current_taken) = outs[leader].clone();
-        out.estimate.covariance = spread_about(&members4[leader].1, &members4);
-        out.estimate.altitude_std_error_m = spread_about(&members1[leader].1, &members1)[(0, 0)]
-            .max(0.0)
-            .sqrt();
-        let v = spread_about(&velocity[leader].1, &velocity);
+        out.estimate.covariance = spread(&w, leader, &outs, |o| {
+            let e = &o.estimate;
+            let mean =
+                SVector::<f64, 4>::new(e.position.x, e.position.y, e.yaw_bias[0], e.yaw_bias[1]);
+            (mean, e.covariance)
+        });
+        let z = spread(&w, leader, &outs, |o| {
+            let e = &o.estimate;
+            (
+                SVector::<f64, 1>::new(e.position.z),
+                SMatrix::<f64, 1, 1>::new(e.altitude_std_error_m.powi(2)),
+            )
+        });
+        out.estimate.altitude_std_error_m = z[(0, 0)].max(0.0).sqrt();
+        let v = spread(&w, leader, &outs, |o| {
+            let variance = SVector::<f64, 2>::from(o.velocity_std_mps.map(|s| s * s));
+            (
+                SVector::<f64, 2>::from(o.velocity),
+                SMatrix::<f64, 2, 2>::from_diagonal(&variance),
+            )
+        });
         out.velocity_std_mps = [v[(0, 0)].max(0.0).sqrt(), v[(1, 1)].max(0.0).sqrt()];
         let c = &out.estimate.covariance;
         let limit = self.config.temporal.converged_bias_sigma_deg.to_radians();
