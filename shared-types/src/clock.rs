@@ -44,14 +44,22 @@ mod tests {
         assert_eq!(elapsed_us(1_000, 5_000), 4);
     }
 
+    /// Process CPU time counts the whole test binary, whose other tests run on other
+    /// threads meanwhile: with a 20 ms sleep against ~15 ms of work, another test busy
+    /// during the sleep made the sleep "cost" more (seen once in CI). So the sleep is
+    /// short and the work long: the sleep window can hold at most 2 ms per core of
+    /// other threads' CPU, the work 100 ms of this thread's.
     #[test]
     fn process_cpu_time_counts_work_not_sleep() {
         let a = process_cpu_ns();
-        std::thread::sleep(std::time::Duration::from_millis(20));
+        std::thread::sleep(std::time::Duration::from_millis(2));
         let b = process_cpu_ns();
+        let start = monotonic_ns();
         let mut x = 0u64;
-        for i in 0..20_000_000u64 {
-            x = std::hint::black_box(x.wrapping_add(i * i));
+        while monotonic_ns() - start < 100_000_000 {
+            for i in 0..10_000u64 {
+                x = std::hint::black_box(x.wrapping_add(i * i));
+            }
         }
         let c = process_cpu_ns();
         assert!(a > 0 && b >= a && c > b, "{a} {b} {c} {x}");
