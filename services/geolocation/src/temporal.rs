@@ -1129,6 +1129,21 @@ mod tests {
         assert!((e.estimate.position - tr.target).norm() < 30.0);
     }
 
+    /// NEES over x, y (their 2×2 covariance) and z (v_acc) of one estimate, and whether
+    /// it is beyond 3σ (horizontal beyond 3 h_acc or vertical beyond 3 v_acc).
+    fn nees_of(e: &TemporalEstimate, truth: Point3<f64>) -> (f64, bool) {
+        let d = e.estimate.position - truth;
+        let c = e.estimate.covariance.fixed_view::<2, 2>(0, 0).into_owned();
+        let Some(ci) = c.try_inverse() else {
+            panic!("singular horizontal covariance {c}")
+        };
+        let h = nalgebra::Vector2::new(d.x, d.y);
+        let v = e.estimate.altitude_std_error_m;
+        let h_acc = (c[(0, 0)] + c[(1, 1)]).sqrt();
+        let nees = (h.transpose() * ci * h)[(0, 0)] + (d.z / v).powi(2);
+        (nees, h.norm() > 3.0 * h_acc || d.z.abs() > 3.0 * v)
+    }
+
     /// Issue #23 item 8: on exact synthetic rays with the noise the filter is told (the
     /// paper's Table 2: σ_att 2°, σ_pos 3 m, eq. (34) biases with δψ0 = 20°), its
     /// stated covariance is honest from the first estimate: the mean normalised error
@@ -1142,17 +1157,9 @@ mod tests {
         let (mut sum, mut n, mut gross) = (0.0, 0usize, 0usize);
         for seed in 0..runs {
             for (_, e, truth, _) in fly(&scenario, 25.0, 300 + seed) {
-                let d = e.estimate.position - truth;
-                let c = e.estimate.covariance.fixed_view::<2, 2>(0, 0).into_owned();
-                let Some(ci) = c.try_inverse() else {
-                    panic!("singular horizontal covariance {c}")
-                };
-                let h = nalgebra::Vector2::new(d.x, d.y);
-                let v = e.estimate.altitude_std_error_m;
-                let nees_h = (h.transpose() * ci * h)[(0, 0)];
-                sum += nees_h + (d.z / v).powi(2);
-                let h_acc = (c[(0, 0)] + c[(1, 1)]).sqrt();
-                gross += usize::from(h.norm() > 3.0 * h_acc || d.z.abs() > 3.0 * v);
+                let (nees, beyond) = nees_of(&e, truth);
+                sum += nees;
+                gross += usize::from(beyond);
                 n += 1;
             }
         }
@@ -1430,16 +1437,9 @@ mod tests {
             // The start's hypotheses have been decided (merged or dropped) by 20 s.
             assert_eq!(open, 1, "seed {seed}: {open} hypotheses still open");
             for (_, e, truth, _) in run {
-                let d = e.estimate.position - truth;
-                let c = e.estimate.covariance.fixed_view::<2, 2>(0, 0).into_owned();
-                let Some(ci) = c.try_inverse() else {
-                    panic!("singular horizontal covariance {c}")
-                };
-                let h = nalgebra::Vector2::new(d.x, d.y);
-                let v = e.estimate.altitude_std_error_m;
-                sum += (h.transpose() * ci * h)[(0, 0)] + (d.z / v).powi(2);
-                let h_acc = (c[(0, 0)] + c[(1, 1)]).sqrt();
-                gross += usize::from(h.norm() > 3.0 * h_acc || d.z.abs() > 3.0 * v);
+                let (nees, beyond) = nees_of(&e, truth);
+                sum += nees;
+                gross += usize::from(beyond);
                 n += 1;
             }
         }
