@@ -722,6 +722,7 @@ pub(crate) mod tests {
         d.set_gate(Some(Gate {
             centre: [40.0, 40.0],
             radius_px: 30.0,
+            prefer_centre: false,
         }));
         assert!(d
             .detect_near(&alone, fresh([140.0, 100.0]))
@@ -730,6 +731,7 @@ pub(crate) mod tests {
         d.set_gate(Some(Gate {
             centre: [140.0, 40.0],
             radius_px: 30.0,
+            prefer_centre: false,
         }));
         assert!(d
             .detect_near(&alone, fresh([140.0, 100.0]))

@@ -102,10 +102,11 @@ impl TrackedDetector {
         let reacquiring = lost && gate.is_none();
         // The image track refines the gate: its hint (with its landmarks) stands when it
         // lies inside the gate; otherwise the blob nearest the predicted pixel (inside
-        // the gate) wins.
+        // the gate) wins. A coasting filter's gate (both cameras' last detections
+        // disagreed with it) distrusts the track: nearest the predicted pixel.
         let own = guard.hint(t_s);
         let hint = match (own, gate) {
-            (Some(h), Some(g)) if !g.contains(h.centre) => Some(TrackHint {
+            (Some(h), Some(g)) if !g.contains(h.centre) || g.prefer_centre => Some(TrackHint {
                 centre: g.centre,
                 fresh: false,
                 age_s: h.age_s,
@@ -134,7 +135,8 @@ impl TrackedDetector {
             // else. If landmarks moved in line with a candidate inside the gate, that is
             // the target; otherwise the blob nearest the gate's centre.
             let mut found = Ok(None);
-            if own.is_some_and(|h| h.fresh) && !landmarks.is_empty() {
+            let track_trusted = gate.is_none_or(|g| !g.prefer_centre);
+            if track_trusted && own.is_some_and(|h| h.fresh) && !landmarks.is_empty() {
                 self.detector.set_landmarks(landmarks);
                 found = self.detector.detect_near(frame, own);
             }
@@ -245,6 +247,35 @@ mod tests {
         }
         let swung = d.detect(0, 20.0 * dt, &street(&[(350, 170)])).unwrap();
         assert_eq!(swung.map(|f| f.centre), Some([350.0, 170.0]));
+    }
+
+    /// The track follows a look-alike (the target hid, the look-alike came out first);
+    /// the target reappears 60 px behind it, nearer the filter's prediction. A
+    /// tracking filter's gate holding both keeps the track's pick; a coasting filter's
+    /// (both cameras disagreed with it) takes the blob nearest its predicted pixel.
+    #[test]
+    fn a_coasting_filters_gate_takes_the_blob_nearest_its_prediction() {
+        let dt = 1.0 / 30.0;
+        let run = |prefer_centre: bool| {
+            let mut d = TrackedDetector::new(ColourBlobConfig::default()).unwrap();
+            for k in 0..10 {
+                let found = d
+                    .detect(0, k as f64 * dt, &street(&[(360 + k, 200)]))
+                    .unwrap()
+                    .unwrap();
+                assert_eq!(found.centre[0], (360 + k) as f64);
+            }
+            let gate = Gate {
+                centre: [305.0, 200.0],
+                radius_px: 100.0,
+                prefer_centre,
+            };
+            d.detect_gated(0, 10.0 * dt, &street(&[(370, 200), (310, 200)]), Some(gate))
+                .unwrap()
+                .map(|f| f.centre[0])
+        };
+        assert_eq!(run(false), Some(370.0), "the track's pick inside the gate");
+        assert_eq!(run(true), Some(310.0), "nearest the coasting prediction");
     }
 
     #[test]

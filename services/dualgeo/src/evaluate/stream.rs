@@ -108,9 +108,10 @@ impl SceneStream {
                     .sum::<f64>()
                     .sqrt(),
                 yaw_bias: e.estimate.yaw_bias,
+                yaw_bias_variance: [e.estimate.covariance[(2, 2)], e.estimate.covariance[(3, 3)]],
+                coasting: e.quality == geolocation::Quality::Coasting,
             };
-            let tracking = e.quality == geolocation::Quality::Tracking;
-            (tracking && p.is_finite()).then_some(p)
+            p.is_finite().then_some(p)
         });
         self.predictions.push(pair_seq, prediction);
     }
