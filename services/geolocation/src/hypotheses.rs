@@ -20,9 +20,11 @@
 //! the Gaussian-sum filter of Alspach and Sorenson (1972), used only where the
 //! posterior is far from one Gaussian.
 //!
-//! `[estimator.temporal] bias_hypotheses` sets the grid (1, the default, is one
-//! filter: detection gates only with `tracking` estimates, and on `suite_traffic` the
-//! longer `converging` start left the detector to take a look-alike; docs/temporal.md).
+//! `[estimator.temporal] bias_hypotheses` sets the grid (3, the default; 1 is one
+//! filter started at the window estimate, as before issue #23's last step). The
+//! honest mixture stays `converging` longer than one overconfident filter did, so
+//! detection gates with `converging` estimates too, the biases' σ widening the gate
+//! (`detection::prediction_gate`; docs/temporal.md).
 //!
 //! Pure functions over plain data (nalgebra); `temporal.rs` runs the filters.
 
@@ -50,6 +52,9 @@ pub(crate) struct Hypothesis {
     pub(crate) drift: [Vector2<f64>; 2],
     /// Geolocations since the last re-opening.
     pub(crate) since_reopen: usize,
+    /// Time both UAVs' running means started drifting (the filter coasting on them);
+    /// `None` while either agrees. Not checkpointed: a restart counts afresh.
+    pub(crate) lost_since_s: Option<f64>,
 }
 
 /// A start's bias hypothesis: mean (radians), σ (radians) and prior log weight.
@@ -189,6 +194,7 @@ mod tests {
             slots: Vec::new(),
             drift: [Vector2::zeros(); 2],
             since_reopen: 0,
+            lost_since_s: None,
         }
     }
 

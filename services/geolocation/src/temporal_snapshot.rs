@@ -117,6 +117,7 @@ impl TemporalEstimator {
                 slots,
                 drift: snapshot.drift.map(|d| Vector2::new(d[0], d[1])),
                 since_reopen: usize::try_from(snapshot.since_reopen).unwrap_or(usize::MAX),
+                lost_since_s: None,
             }];
         } else if !slots.is_empty() {
             return Err(invalid("keyframe slots without a state"));
