@@ -31,7 +31,8 @@
 //! other's stays inside: that bias and the position are re-opened and the filter
 //! re-converges. When both leave together neither camera is looking at the predicted
 //! target (a look-alike while it hides: the two AHRS do not step together): their
-//! rays are refused and the filter coasts.
+//! rays are refused and the filter coasts; still so after `LOST_AFTER_S`, the target
+//! is elsewhere and its position and velocity are re-acquired, the biases kept.
 //!
 //! With `bias_hypotheses` = 3 (the default) the start is a Gaussian sum over the two
 //! yaw biases (`hypotheses.rs`): 9 such filters until the data decide between them,
@@ -823,13 +824,14 @@ impl TemporalEstimator {
         // `LOST_AFTER_S`: then the target is elsewhere, and the position and velocity
         // are re-acquired from the rays with the biases kept (below).
         let both_drifting = drift.iter().all(|d| *d > DRIFT_GATE);
-        let lost_since = if both_drifting {
-            *hypothesis.lost_since_s.get_or_insert(t_s)
+        if both_drifting {
+            hypothesis.lost_since_s.get_or_insert(t_s);
         } else {
             hypothesis.lost_since_s = None;
-            t_s
-        };
-        let lost = both_drifting && t_s - lost_since >= LOST_AFTER_S;
+        }
+        let lost = hypothesis
+            .lost_since_s
+            .is_some_and(|since| t_s - since >= LOST_AFTER_S);
         if both_drifting && !lost {
             accepted.clear();
         }
