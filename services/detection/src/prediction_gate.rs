@@ -235,11 +235,11 @@ pub const ESTIMATE_LAG_PAIRS: u64 = 2;
 ///
 /// A pair with no estimate to gate with (none made, or rejected) leaves the newest
 /// one in force until it is older than `max_age_s` ([`gate_for`]): while the target
-/// is hidden, a blob of its colour far from where it should be is not it. Measured over 8 seeds of `suite_traffic` this was worse when the
-/// detector still took a lone look-alike far from a fresh track (gross errors 24 →
-/// 48 %: a filter that had taken the look-alike kept it); with the constellation and
-/// the lone-blob rule (`constellation.rs`, `colour_blob.rs`) it is better (see
-/// CHANGELOG).
+/// is hidden, a blob of its colour far from where it should be is not it. Measured
+/// over 8 seeds of `suite_traffic` this was worse when the detector still took a lone
+/// look-alike far from a fresh track (gross errors 24 → 48 %: a filter that had taken
+/// the look-alike kept it); with the constellation and the lone-blob rule
+/// (`constellation.rs`, `colour_blob.rs`) it is better (see CHANGELOG).
 #[derive(Debug, Default)]
 pub struct RecentPredictions {
     /// (pair_seq, prediction), oldest first; at most 8.

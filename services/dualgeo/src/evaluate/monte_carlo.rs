@@ -378,7 +378,8 @@ mod tests {
     /// swinging by about the two cars' spacing while they are side by side; 3, the
     /// look-alike 15 m behind the target as it slides under the bridge; 5, the target
     /// hidden from one camera for over 2 s (and, with the bias hypotheses, both cameras
-    /// taking the look-alike as it leaves the bridge first). None of these estimates a look-alike now
+    /// taking the look-alike as it leaves the bridge first). None of these estimates a
+    /// look-alike now
     /// (seed 4, where both cars are under the bridge at once and the look-alike comes
     /// out first in the target's track, still does: see docs/monte-carlo.md).
     #[test]

@@ -430,7 +430,7 @@ fn unstepped_shift_deg(track: &[(f64, f64, f64)]) -> Option<(f64, f64)> {
         .iter()
         .filter(|p| p.0 >= STEP_AT_S)
         .map(|p| (p.2 - mean).abs())
-        .fold(None, |m: Option<f64>, d| Some(m.map_or(d, |m| m.max(d))))?;
+        .reduce(f64::max)?;
     Some((mean, shift))
 }
 
