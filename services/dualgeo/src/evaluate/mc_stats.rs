@@ -209,8 +209,12 @@ pub struct SceneSummary {
     /// `runs` independent runs (χ²(3·runs)/runs).
     pub mean_nees: f64,
     pub nees_bounds: [f64; 2],
-    /// Mean vertical error (estimate − truth) after the warm-up, pooled.
+    /// Mean vertical error (estimate − truth) after the warm-up, pooled, and its
+    /// standard error over runs (the spread of the runs' own means / √runs): under
+    /// correlated navigation errors each run's altitude carries its GPS's metres, and
+    /// a mean over 8 runs cannot show a 0.3 m offset.
     pub mean_z_err_m: f64,
+    pub mean_z_err_se_m: f64,
     /// Median over runs of the time-to-trust (error stays within 2 m), and the worst;
     /// runs that never got there count as infinite.
     pub time_to_trust_median_s: f64,
@@ -263,6 +267,21 @@ pub fn summarise(runs: &[RunRecord], warm_up_s: f64) -> SceneSummary {
     } else {
         after.iter().map(|e| e.err[2]).sum::<f64>() / after.len() as f64
     };
+    let run_means: Vec<f64> = runs
+        .iter()
+        .filter_map(|r| {
+            let z: Vec<f64> = r.after(warm_up_s).map(|e| e.err[2]).collect();
+            (!z.is_empty()).then(|| z.iter().sum::<f64>() / z.len() as f64)
+        })
+        .collect();
+    let mean_z_err_se_m = if run_means.len() < 2 {
+        f64::NAN
+    } else {
+        let m = run_means.iter().sum::<f64>() / run_means.len() as f64;
+        let var =
+            run_means.iter().map(|v| (v - m).powi(2)).sum::<f64>() / (run_means.len() - 1) as f64;
+        (var / run_means.len() as f64).sqrt()
+    };
     let times = |f: &dyn Fn(&RunRecord) -> Option<f64>| -> Vec<f64> {
         runs.iter().map(|r| f(r).unwrap_or(f64::INFINITY)).collect()
     };
@@ -297,6 +316,7 @@ pub fn summarise(runs: &[RunRecord], warm_up_s: f64) -> SceneSummary {
         mean_nees,
         nees_bounds,
         mean_z_err_m,
+        mean_z_err_se_m,
         time_to_trust_median_s: median_incl_inf(&trust),
         time_to_trust_worst_s: trust.iter().copied().fold(f64::NAN, f64::max),
         first_estimate_median_s: median_incl_inf(&times(&|r| r.first_estimate_s())),
@@ -399,6 +419,27 @@ mod tests {
         // Far from both, nearer the target: a bad estimate, not a look-alike's.
         assert!(!of_a_look_alike([-9.0, 0.0, 13.0], target, [look_alike]));
         assert!(!of_a_look_alike([18.0, 3.0, 13.0], target, []));
+    }
+
+    /// Runs whose altitudes are each a few metres off (a correlated GPS error) give a
+    /// mean vertical error with a standard error of the runs' spread / √runs; white
+    /// errors within runs give one near zero.
+    #[test]
+    fn the_mean_vertical_errors_standard_error_is_over_runs() {
+        let run = |seed: u64, z: f64| RunRecord {
+            seed,
+            estimates: (0..100)
+                .map(|i| row(10.0 + i as f64 * 0.1, [0.0, 0.0, z], 1.0))
+                .collect(),
+            ..Default::default()
+        };
+        let s = summarise(&[run(1, 3.0), run(2, -1.0), run(3, 1.0)], 10.0);
+        // Means +3, −1, +1: mean +1, sample σ 2, standard error 2/√3.
+        assert!((s.mean_z_err_m - 1.0).abs() < 1e-9);
+        assert!((s.mean_z_err_se_m - 2.0 / 3f64.sqrt()).abs() < 1e-9);
+        let same = summarise(&[run(1, 0.2), run(2, 0.2)], 10.0);
+        assert!(same.mean_z_err_se_m.abs() < 1e-9);
+        assert!(summarise(&[run(1, 0.2)], 10.0).mean_z_err_se_m.is_nan());
     }
 
     #[test]
