@@ -135,7 +135,7 @@ pub struct DetectionMsg {
 /// One image of an observation set: the measured pose and the target's pixel.
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
 #[repr(C)]
-#[type_name("dualgeo::ObservationEntry/v2")]
+#[type_name("dualgeo::ObservationEntry/v3")]
 pub struct ObservationEntry {
     /// 0 = left, 1 = right.
     pub uav: u8,
@@ -143,6 +143,9 @@ pub struct ObservationEntry {
     /// The image's frame sequence number (with `uav`, its identity across sets: the
     /// temporal estimator recognises a reused keyframe by it).
     pub frame_seq: u64,
+    /// The image's capture time, seconds, on the clock of the set's `t_s` (a past
+    /// image's is earlier: the temporal estimator ages its correlated pose error).
+    pub t_s: f64,
     pub pose: PoseSample,
     /// (u, v), pixels: the detection (current images) or the epipolar transfer (past).
     pub pixel: [f64; 2],
@@ -157,7 +160,7 @@ pub const MAX_OBSERVATIONS: usize = 32;
 /// `entries[1]` the current right one, then `count − 2` past images.
 #[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
 #[repr(C)]
-#[type_name("dualgeo::ObservationSetMsg/v3")]
+#[type_name("dualgeo::ObservationSetMsg/v4")]
 pub struct ObservationSetMsg {
     /// Index of this set among the sets matching published (gaps = sets lost).
     pub set_seq: u64,

@@ -7,7 +7,7 @@
 //! window estimate the first time.
 
 use crate::{
-    geolocate_configured, Estimate, EstimatorConfig, EstimatorError, ImageId, Observation,
+    geolocate_configured, Estimate, EstimatorConfig, EstimatorError, Observation, PastImage,
     TemporalEstimator,
 };
 
@@ -29,16 +29,17 @@ pub struct SetEstimate {
 }
 
 /// `current` is the current (left, right) pair; `past` the past images with their
-/// identities (UAV, frame sequence number), in the order matching gave them.
+/// identities (UAV, frame sequence number) and capture times, in the order matching
+/// gave them.
 /// `temporal` must be `Some` exactly when `config.method` is `Temporal`.
 pub fn estimate_set(
     t_s: f64,
     current: [&Observation; 2],
-    past: &[(ImageId, Observation)],
+    past: &[PastImage],
     config: &EstimatorConfig,
     temporal: Option<&mut TemporalEstimator>,
 ) -> Result<SetEstimate, EstimatorError> {
-    let past_only: Vec<Observation> = past.iter().map(|(_, o)| *o).collect();
+    let past_only: Vec<Observation> = past.iter().map(|image| image.observation).collect();
     let window = geolocate_configured(current[0], current[1], &past_only, config);
     match temporal {
         None => window.map(|f| SetEstimate {

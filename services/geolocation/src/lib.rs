@@ -42,7 +42,7 @@ pub use consistency::{
 };
 pub use error::EstimatorError;
 pub use iteration::{geolocate, Estimate};
-pub use observation::{ImageId, Observation};
+pub use observation::{ImageId, Observation, PastImage};
 pub use one_shot::one_shot;
 pub use temporal::{Quality, TemporalEstimate, TemporalEstimator};
 pub use temporal_snapshot::TemporalSnapshot;

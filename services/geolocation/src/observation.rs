@@ -8,6 +8,18 @@ use shared_types::messages::{ObservationEntry, PoseSample};
 /// Identifies an image across geolocations: (UAV, frame sequence number).
 pub type ImageId = (Uav, u64);
 
+/// A past image of an observation set, as the temporal filter takes it: its identity
+/// (a keyframe reused by many sets is recognised by it), when it was taken and what it
+/// shows. The capture time tells the filter how far its UAV's correlated pose error
+/// has moved on since (`temporal.rs`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PastImage {
+    pub id: ImageId,
+    /// Capture time, seconds, on the clock of the set's `t_s`.
+    pub t_s: f64,
+    pub observation: Observation,
+}
+
 /// One image `g_k`: the measured state γ of its UAV when it was taken and the pixel of
 /// the target's *current* position P in it (from detection for the current images,
 /// from corresponding-point matching for past ones).

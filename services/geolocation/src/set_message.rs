@@ -5,7 +5,7 @@
 //! non-finite estimate.
 
 use crate::TemporalSnapshot;
-use crate::{estimate_set, EstimatorConfig, ImageId, Observation, TemporalEstimator};
+use crate::{estimate_set, EstimatorConfig, Observation, PastImage, TemporalEstimator};
 use serde::{Deserialize, Serialize};
 use shared_types::messages::{EstimateMsg, EstimateStatus, ObservationSetMsg};
 use shared_types::stats::StageStats;
@@ -114,10 +114,14 @@ fn estimate_unchecked(
             return msg;
         }
     };
-    let past: Vec<(ImageId, Observation)> = set.entries()[2..]
+    let past: Vec<PastImage> = set.entries()[2..]
         .iter()
         .zip(&observations[2..])
-        .map(|(entry, o)| ((o.uav, entry.frame_seq), *o))
+        .map(|(entry, o)| PastImage {
+            id: (o.uav, entry.frame_seq),
+            t_s: entry.t_s,
+            observation: *o,
+        })
         .collect();
     let current = [&observations[0], &observations[1]];
     let result = estimate_set(set.t_s, current, &past, config, temporal).inspect(|e| {
@@ -180,6 +184,7 @@ mod tests {
         for (i, (slot, o)) in set.entries.iter_mut().zip(&trial.observations).enumerate() {
             *slot = o.to_entry();
             slot.frame_seq = i as u64;
+            slot.t_s = t_s;
             set.count += 1;
         }
         set

@@ -130,7 +130,7 @@ impl TemporalEstimator {
 mod tests {
     use super::*;
     use crate::synthetic::SyntheticScenario;
-    use crate::Observation;
+    use crate::PastImage;
     use rand::SeedableRng;
 
     /// Feeds `filter` synthetic trials from `t` for `seconds`; returns the last estimate.
@@ -147,11 +147,15 @@ mod tests {
         while t < t0 + seconds {
             if let Ok(trial) = scenario.trial(t, 4, rng) {
                 let o = &trial.observations;
-                let past: Vec<(ImageId, Observation)> = o[2..]
+                let past: Vec<PastImage> = o[2..]
                     .iter()
                     .map(|ob| {
                         *next_id += 1;
-                        ((ob.uav, *next_id), *ob)
+                        PastImage {
+                            id: (ob.uav, *next_id),
+                            t_s: t,
+                            observation: *ob,
+                        }
                     })
                     .collect();
                 let window = crate::geolocate(o, &EstimatorConfig::default()).ok();

@@ -314,13 +314,16 @@ impl Intake {
                     rejected_past: rejections.len() as u32,
                     ..Default::default()
                 };
-                let seqs = [hl.seq, hr.seq]
+                let frames = [(hl.seq, hl.t_s), (hr.seq, hr.t_s)]
                     .into_iter()
-                    .chain(m.past.iter().map(|p| p.seq));
-                let all = m.current.iter().chain(&m.past_observations).zip(seqs);
-                for (slot, (o, seq)) in msg.entries.iter_mut().zip(all).take(MAX_OBSERVATIONS) {
+                    .chain(m.past.iter().map(|p| (p.seq, p.t_s)));
+                let all = m.current.iter().chain(&m.past_observations).zip(frames);
+                for (slot, (o, (seq, t_s))) in
+                    msg.entries.iter_mut().zip(all).take(MAX_OBSERVATIONS)
+                {
                     *slot = o.to_entry();
                     slot.frame_seq = seq;
+                    slot.t_s = t_s;
                     msg.count += 1;
                 }
                 Some(msg)

@@ -32,6 +32,11 @@ pub const WARM_UP_S: f64 = 10.0;
 /// Bumped when the code changes what a run gives for the same inputs, so cached runs
 /// of an older build are not reused.
 const RUN_FORMAT: u32 = 8;
+/// The same for what changes only runs under correlated (Gauss–Markov) navigation
+/// errors: 9 = the temporal filter's tilt consider states and keyframe ageing, which
+/// exist only with a correlated-error block (white runs are bit-identical, checked on
+/// `default` seed 1).
+const CORRELATED_FORMAT: u32 = 9;
 
 /// The navigation-error models the Monte Carlo runs under.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize, clap::ValueEnum)]
@@ -184,8 +189,13 @@ fn run_key(config: &SimConfig, every: u64, matching: &MatchingConfig, crf: Optio
     let mut h = std::collections::hash_map::DefaultHasher::new();
     // A run without a link keeps the key it had before links existed.
     let link = crf.map(|c| format!(" crf {c}")).unwrap_or_default();
+    let correlated = if config.noise.model.is_white() {
+        String::new()
+    } else {
+        format!(" correlated {CORRELATED_FORMAT}")
+    };
     format!(
-        "{RUN_FORMAT} {every} {:?} {:?} {:?} {:?} {}{link}",
+        "{RUN_FORMAT} {every} {:?} {:?} {:?} {:?} {}{link}{correlated}",
         config,
         detection::ColourBlobConfig::default(),
         matching,

@@ -12,8 +12,8 @@ use super::vision::{ImageRef, Record};
 use acquisition::sim::SimConfig;
 use geolocation::evaluation::ErrorStats;
 use geolocation::{
-    geolocate_configured, geolocate_filtered, one_shot, EstimatorConfig, EstimatorMethod, ImageId,
-    NoiseModel, Observation, TemporalEstimator,
+    geolocate_configured, geolocate_filtered, one_shot, EstimatorConfig, EstimatorMethod,
+    NoiseModel, Observation, PastImage, TemporalEstimator,
 };
 use nalgebra::Vector2;
 use rand::SeedableRng;
@@ -262,12 +262,16 @@ pub fn run(
         let t_s = r.current[0].t_s;
         let (cl, bl) = observation(config, step, &r.current[0]);
         let (cr, br) = observation(config, step, &r.current[1]);
-        let past_ids: Vec<(ImageId, Observation)> = r
+        let past_ids: Vec<PastImage> = r
             .past
             .iter()
-            .map(|i| ((i.uav, i.seq), observation(config, step, i).0))
+            .map(|i| PastImage {
+                id: (i.uav, i.seq),
+                t_s: i.t_s,
+                observation: observation(config, step, i).0,
+            })
             .collect();
-        let past: Vec<Observation> = past_ids.iter().map(|(_, o)| *o).collect();
+        let past: Vec<Observation> = past_ids.iter().map(|image| image.observation).collect();
         let true_bias = [bl, br];
         let paper = geolocate_filtered(&cl, &cr, &past, &estimator);
         match &paper {

@@ -12,7 +12,7 @@ use detection::prediction_gate::{self, GateConfig, RecentPredictions, TargetPred
 use detection::{ColourBlobConfig, TrackCounts, TrackedDetector};
 use geolocation::{
     estimate_set, geolocate_filtered, EstimatorConfig, EstimatorError, EstimatorMethod,
-    FilteredEstimate, ImageId, Observation, SetEstimate, TemporalEstimator,
+    FilteredEstimate, PastImage, SetEstimate, TemporalEstimator,
 };
 use matching::epipolar::MatchReject;
 use matching::{ChainCounts, FrameInput, MatchOutcome, MatchingConfig, VisionChain};
@@ -270,11 +270,15 @@ impl Lane {
         let mut cpu_us = 0.0;
         let (mut default, mut paper) = (None, None);
         if let MatchOutcome::Matched(set) = &outcome {
-            let past: Vec<(ImageId, Observation)> = set
+            let past: Vec<PastImage> = set
                 .past
                 .iter()
                 .zip(&set.past_observations)
-                .map(|(m, o)| ((m.uav, m.seq), *o))
+                .map(|(m, o)| PastImage {
+                    id: (m.uav, m.seq),
+                    t_s: m.t_s,
+                    observation: *o,
+                })
                 .collect();
             let current = [&set.current[0], &set.current[1]];
             default = Some(estimate_set(

@@ -138,6 +138,8 @@ pub fn estimate_matched(set: &MatchedSet, estimator: &EstimatorConfig) -> Locate
 pub struct PastMatch {
     pub uav: Uav,
     pub seq: u64,
+    /// The past image's capture time, seconds (the stream's clock).
+    pub t_s: f64,
     /// p_n: the current target position's pixel in that past image.
     pub pixel: [f64; 2],
     pub inliers: [usize; 2],

@@ -199,6 +199,7 @@ pub(super) fn match_past(
     out.result = pixel.map(|pixel| PastMatch {
         uav,
         seq: kf.seq,
+        t_s: kf.t_s,
         pixel,
         inliers: [gl.inliers, gr.inliers],
         fundamental: [gl.f, gr.f],
