@@ -297,10 +297,10 @@ mod tests {
         // 4·8 + 4·4 + 3·8 + 2·8 + 16·8 + 8 + 2·8 + 8 + 8 + 8: no padding (the fuzz
         // targets read it from arbitrary bytes).
         assert_eq!(std::mem::size_of::<EstimateMsg>(), 264);
-        assert_eq!(std::mem::size_of::<ObservationEntry>(), 112);
+        assert_eq!(std::mem::size_of::<ObservationEntry>(), 120);
         assert_eq!(
             std::mem::size_of::<ObservationSetMsg>(),
-            48 + 112 * MAX_OBSERVATIONS
+            48 + 120 * MAX_OBSERVATIONS
         );
         let set = ObservationSetMsg {
             count: 99,

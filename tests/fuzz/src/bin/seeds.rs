@@ -219,7 +219,8 @@ fn observation_sets(n: usize) -> Vec<ObservationSetMsg> {
                 *slot = o.to_entry();
                 // Current images: this pair; past ones: the keyframe k intervals back.
                 let k = if j < 2 { 0 } else { 1 + (j - 2) % 3 };
-                slot.frame_seq = ((t_s - k as f64 * interval) * 2.0).round() as u64;
+                slot.t_s = t_s - k as f64 * interval;
+                slot.frame_seq = (slot.t_s * 2.0).round() as u64;
                 set.count += 1;
             }
             assert!(set.count as usize <= MAX_OBSERVATIONS);
