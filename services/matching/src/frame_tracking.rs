@@ -31,13 +31,13 @@
 //!   frames of a UAV (the two UAVs half a period apart), on every frame its keyframe
 //!   ring may admit,
 //!   and when a selected past image has neither an anchor nor a failure recorded
-//!   since the last refresh (the chain decides, [`crate::VisionChain::wants_features`]).
+//!   since the last refresh (the chain decides, `VisionChain::wants_features`).
 //!   A past image whose fit failed on the last ORB frame is not retried before the
 //!   next refresh.
 
-use crate::chain::{extract_undistorted, ChainCounts, ChainError, FrameInput, FrameMeta};
 use crate::config::MatchingConfig;
 use crate::features::{Features, OrbExtractor};
+use crate::frame::{extract_undistorted, ChainCounts, ChainError, FrameInput, FrameMeta};
 use crate::robust_fit::{seed_cv_rng, usac_params};
 use opencv::core as cv;
 use opencv::prelude::*;

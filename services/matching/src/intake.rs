@@ -9,7 +9,8 @@
 //! plain `(header, bytes)` views, [`Intake::on_detection`] per detection and
 //! [`Intake::next_set`] until it returns `None`.
 
-use crate::chain::{ChainCounts, FrameInput, FrameMeta, MatchOutcome};
+use crate::chain::MatchOutcome;
+use crate::frame::{ChainCounts, FrameInput, FrameMeta};
 use crate::frame_tracking::{FrameTracker, Observed, TrackReport};
 use crate::ring_store::RingStore;
 use crate::{ChainTiming, MatchingConfig, VisionChain};

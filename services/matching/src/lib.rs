@@ -13,6 +13,7 @@ pub mod chain;
 pub mod config;
 pub mod epipolar;
 pub mod features;
+pub mod frame;
 pub mod frame_tracking;
 pub mod grid;
 pub mod ground_plane;

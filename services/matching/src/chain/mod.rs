@@ -12,7 +12,7 @@ use past::{match_past, Job, PastResult};
 
 use crate::config::MatchingConfig;
 use crate::epipolar::MatchReject;
-use crate::features::{Features, OrbExtractor};
+pub use crate::frame::{extract_undistorted, ChainCounts, ChainError, FrameInput, FrameMeta};
 use crate::frame_tracking::{FrameTracker, Observed, TrackReport};
 use crate::ground_plane::PlaneModel;
 use crate::ring::{Keyframe, KeyframeRing};
@@ -21,80 +21,10 @@ use geolocation::{
     Observation,
 };
 use nalgebra::{Matrix3, Vector2};
-use opencv::core as cv;
 use shared_types::conventions::{Intrinsics, Uav};
-use shared_types::lens::Distortion;
 use shared_types::messages::PoseSample;
 use std::collections::BTreeMap;
 use std::time::Instant;
-
-/// One current frame as the chain needs it.
-#[derive(Debug, Clone, Copy)]
-pub struct FrameInput<'a> {
-    pub seq: u64,
-    pub t_s: f64,
-    /// Measured pose (GPS + AHRS).
-    pub pose: PoseSample,
-    /// BGR or grey pixels.
-    pub image: &'a cv::Mat,
-    /// The detector's target pixel, if it found the target.
-    pub detection: Option<[f64; 2]>,
-    pub intrinsics: Intrinsics,
-    /// The lens distortion of `image` and `detection` (zeros = pinhole).
-    pub distortion: Distortion,
-    pub width: u32,
-    pub height: u32,
-}
-
-impl<'a> FrameInput<'a> {
-    /// The same frame with other pixels (its grey copy).
-    pub fn with_image<'b>(&self, image: &'b cv::Mat) -> FrameInput<'b> {
-        FrameInput::from_meta(&self.meta(), image)
-    }
-
-    /// A frame from its description and pixels.
-    pub fn from_meta(m: &FrameMeta, image: &'a cv::Mat) -> Self {
-        FrameInput {
-            seq: m.seq,
-            t_s: m.t_s,
-            pose: m.pose,
-            image,
-            detection: m.detection,
-            intrinsics: m.intrinsics,
-            distortion: m.distortion,
-            width: m.width,
-            height: m.height,
-        }
-    }
-
-    /// Everything but the pixels.
-    pub fn meta(&self) -> FrameMeta {
-        FrameMeta {
-            seq: self.seq,
-            t_s: self.t_s,
-            pose: self.pose,
-            detection: self.detection,
-            intrinsics: self.intrinsics,
-            distortion: self.distortion,
-            width: self.width,
-            height: self.height,
-        }
-    }
-}
-
-/// A current frame without its pixels: what matching needs once ORB has run.
-/// `detection` is in the recorded (distorted) pixels; matching undistorts it.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct FrameMeta {
-    pub seq: u64,
-    pub t_s: f64,
-    pub pose: PoseSample,
-    pub detection: Option<[f64; 2]>,
-    pub intrinsics: Intrinsics,
-    pub distortion: Distortion,
-    pub width: u32,
-    pub height: u32,
-}
 
 /// The observation set of one pair: what the geolocation stage estimates from.
 #[derive(Debug, Clone, PartialEq)]
@@ -214,56 +144,6 @@ pub struct ChainResult {
     /// Past images that gave no point, with the reason.
     pub rejections: Vec<(Uav, u64, MatchReject)>,
     pub timing: ChainTiming,
-}
-
-#[derive(Debug, thiserror::Error)]
-pub enum ChainError {
-    #[error("invalid configuration: {0}")]
-    Config(String),
-    #[error("OpenCV: {0}")]
-    OpenCv(String),
-    /// Frame-to-frame tracking lost hold of a frame's pixels (a bug, never input).
-    #[error("frame tracking: {0}")]
-    Tracking(&'static str),
-}
-
-impl From<opencv::Error> for ChainError {
-    fn from(e: opencv::Error) -> Self {
-        ChainError::OpenCv(e.message)
-    }
-}
-
-/// What the chain had to adapt since the last [`VisionChain::take_counts`]: the
-/// fallbacks and retries that keep it working on scenes unlike the one it was tuned on.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
-pub struct ChainCounts {
-    /// Current-side matchings run again with `retry_ratio_test`.
-    pub retried_looser_ratio: u64,
-    /// Of those, the ones that then gave a usable F.
-    pub retry_rescued: u64,
-    /// Frames whose FAST threshold was lowered for want of corners.
-    pub fast_threshold_lowered: u64,
-    /// Keypoints dropped because the lens model could not undistort them.
-    pub keypoints_outside_lens: u64,
-    /// Current frames whose detection could not be undistorted.
-    pub detections_outside_lens: u64,
-    /// Tracked frames that needed ORB after all, when their pair was matched (a past
-    /// image without a chained homography, or an admission the tracker did not foresee).
-    pub late_orb: u64,
-    /// Past-image sides whose homography was carried by tracking (no ORB, no fit).
-    pub chained_sides: u64,
-}
-
-impl std::ops::AddAssign for ChainCounts {
-    fn add_assign(&mut self, c: Self) {
-        self.retried_looser_ratio += c.retried_looser_ratio;
-        self.retry_rescued += c.retry_rescued;
-        self.fast_threshold_lowered += c.fast_threshold_lowered;
-        self.keypoints_outside_lens += c.keypoints_outside_lens;
-        self.detections_outside_lens += c.detections_outside_lens;
-        self.late_orb += c.late_orb;
-        self.chained_sides += c.chained_sides;
-    }
 }
 
 pub struct VisionChain {
@@ -708,25 +588,4 @@ fn smoothed_next(
         Some((t0, s)) if t_s <= t0 && t_s > t0 - 1.0 => (t0, s),
         _ => (t_s, p),
     }
-}
-
-/// ORB on one frame, its keypoints then moved to their undistorted positions, with
-/// what that took (lowered FAST thresholds, keypoints the lens model dropped).
-pub fn extract_undistorted(
-    orb: &mut OrbExtractor,
-    frame: &FrameInput,
-) -> Result<(Features, ChainCounts), ChainError> {
-    let (mut features, report) = orb.extract_reported(frame.image)?;
-    let dropped = features.undistort(
-        &frame.intrinsics,
-        &frame.distortion,
-        frame.width,
-        frame.height,
-    );
-    let counts = ChainCounts {
-        fast_threshold_lowered: (report.threshold_lowered > 0) as u64,
-        keypoints_outside_lens: dropped as u64,
-        ..ChainCounts::default()
-    };
-    Ok((features, counts))
 }
