@@ -450,11 +450,12 @@ impl TemporalEstimator {
     /// through both cameras and the target (the angle between the rays is kept:
     /// inscribed angle theorem), a curved direction the rays cannot see. An EKF that
     /// estimates the tilts relinearises at a new point of that circle at every update
-    /// and gains information along it that the data never gave. Exact rays with the
-    /// tilts constant (τ 1000 s, 2°) and the biases known: NEES 4.6 over x, y → 1.9 as
-    /// consider states; the default Gauss–Markov model (τ 10 s): 5.0 → 2.5 (2 if
-    /// calibrated). A white tilt is new in every image and has no such direction: it
-    /// stays estimated (as consider states it cost 3× the horizontal MAE).
+    /// and gains information along it that the data never gave. Exact rays with a roll
+    /// error constant over the run (4°, τ 1000 s) and the biases known: NEES over x, y
+    /// 4.3 → 1.9 as consider states; the default Gauss–Markov model (τ 10 s): 5.0 → 2.6
+    /// (2 if calibrated; docs/temporal.md). A white tilt is new in every image and has
+    /// no such direction: it stays estimated (as consider states it cost 3× the
+    /// horizontal MAE).
     fn considered_tilts(&self, slots: &[ImageId]) -> Vec<usize> {
         let core = self.core_len();
         let mut out = Vec::new();
