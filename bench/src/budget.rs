@@ -120,7 +120,8 @@ pub fn read(path: &Path) -> Result<Vec<PairBudget>> {
     Ok(out)
 }
 
-fn percentile(sorted: &[f64], q: f64) -> f64 {
+/// The `q` quantile of ascending `sorted` (the nearest rank; NaN when empty).
+pub fn percentile(sorted: &[f64], q: f64) -> f64 {
     if sorted.is_empty() {
         return f64::NAN;
     }
