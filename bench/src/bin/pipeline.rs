@@ -11,10 +11,10 @@
 //! Each run is repeated `--repeats` times (3 by default; one run of a 2-core machine
 //! shared with other work is not a measurement) and each figure is the median over the
 //! repeats, printed with their range and beside the committed one
-//! (`bench/baselines/pipeline.json`) as a ratio: the latency regression guard. `--save-baseline` makes this run the
-//! committed one; `--write-docs` regenerates the measured section of docs/pipeline.md
-//! (between its `bench:pipeline` markers), with the latency budget of each paced run
-//! from its trace.
+//! (`bench/baselines/pipeline.json`) as a ratio: the latency regression guard.
+//! `--save-baseline` makes this run the committed one; `--write-docs` regenerates the
+//! measured section of docs/pipeline.md (between its `bench:pipeline` markers), with
+//! the latency budget of each paced run from its first run's trace.
 //!
 //! Needs the workspace's binaries (`cargo build --release --workspace`).
 //! Run: `cargo run --release -p dualgeo-bench --bin pipeline [-- --duration-s 20]`
