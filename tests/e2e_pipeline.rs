@@ -144,9 +144,14 @@ fn pipeline_on_a_recording_and_a_corrupt_image() {
         "{hgrm}"
     );
 
-    // 2. The temporal estimator in the geolocation service, chosen by configuration.
+    // 2. The temporal estimator in the geolocation service, chosen by configuration,
+    // and matching pinned to CPU 0 at SCHED_FIFO 15 (`[realtime]`).
     let config = dir.join("temporal.toml");
-    std::fs::write(&config, "[estimator]\nmethod = \"temporal\"\n").unwrap();
+    std::fs::write(
+        &config,
+        "[estimator]\nmethod = \"temporal\"\n[realtime.matching]\ncpus = [0]\nfifo_priority = 15\n",
+    )
+    .unwrap();
     let out_t = dir.s("out-temporal");
     let o = dualgeo(&[
         "run",
@@ -159,7 +164,20 @@ fn pipeline_on_a_recording_and_a_corrupt_image() {
         "--out",
         &out_t,
     ]);
-    assert!(o.status.success(), "{}", text(&o.stderr));
+    let stderr = text(&o.stderr);
+    assert!(o.status.success(), "{stderr}");
+    // The service read its table and says what it has: all of it, or (without
+    // CAP_SYS_NICE, `mode = "auto"`) a warning naming what the kernel refused.
+    let applied = stderr
+        .lines()
+        .find(|l| l.contains("[realtime.matching] applied"))
+        .unwrap_or_else(|| panic!("no [realtime.matching] line: {stderr}"));
+    if !stderr.contains("running without it") {
+        assert!(
+            applied.contains("fifo_priority") && applied.contains("15") && applied.contains("[0]"),
+            "{applied}"
+        );
+    }
     let report = json(&dir.join("out-temporal/report.json"));
     assert!(report["estimates_out"].as_u64().unwrap() >= 40, "{report}");
     assert_eq!(
@@ -209,20 +227,26 @@ fn bad_input_at_the_boundary_is_a_clear_error() {
 
     std::fs::create_dir_all(&dir.0).unwrap();
     let config = dir.join("bad.toml");
-    std::fs::write(&config, "[matching]\norb_features = 3\n").unwrap();
-    let o = dualgeo(&[
-        "run",
-        "--config",
-        config.to_str().unwrap(),
-        "--out",
-        &dir.s("out"),
-    ]);
-    assert!(!o.status.success());
-    assert!(
-        text(&o.stderr).contains("[matching]"),
-        "{}",
-        text(&o.stderr)
-    );
+    // Each bad configuration is refused before any process starts, naming its section.
+    for (toml, says) in [
+        ("[matching]\norb_features = 3\n", "[matching]"),
+        // A CPU the machine does not have.
+        (
+            "[realtime.detection]\ncpus = [4096]\n",
+            "[realtime.detection] cpus: CPU 4096",
+        ),
+    ] {
+        std::fs::write(&config, toml).unwrap();
+        let o = dualgeo(&[
+            "run",
+            "--config",
+            config.to_str().unwrap(),
+            "--out",
+            &dir.s("out"),
+        ]);
+        assert!(!o.status.success(), "{toml}");
+        assert!(text(&o.stderr).contains(says), "{}", text(&o.stderr));
+    }
 }
 
 /// `dualgeo run ARGS` with its output captured.

@@ -9,6 +9,7 @@ pub mod conventions;
 pub mod lens;
 pub mod messages;
 pub mod nav_noise;
+pub mod realtime;
 pub mod service_names;
 pub mod shell;
 pub mod stats;

@@ -93,6 +93,32 @@ pub enum ShellError {
     Config { path: PathBuf, detail: String },
     #[error("iceoryx2 wait: {0}")]
     Wait(String),
+    #[error(transparent)]
+    Realtime(#[from] crate::realtime::RealtimeError),
+}
+
+/// Applies the service's `[realtime.<stage>]` table (`crate::realtime`: CPUs, SCHED_FIFO,
+/// locked memory) to the whole process and logs what it has: under `mode = "auto"` (the
+/// default) a setting the kernel refuses is a warning and the service runs without
+/// it. Called once, right after the service reads its configuration.
+pub fn apply_realtime(path: Option<&Path>, stage: &str) -> Result<(), ShellError> {
+    let config: crate::realtime::RealtimeConfig = load_section(path, "realtime")?;
+    let priority = config.for_stage(stage)?;
+    if config.mode == crate::realtime::RealtimeMode::Off || priority.is_off() {
+        return Ok(());
+    }
+    let applied = crate::realtime::apply(config.mode, stage, priority)?;
+    for refusal in &applied.refused {
+        tracing::warn!("{refusal}: running without it");
+    }
+    tracing::info!(
+        cpus = ?applied.cpus,
+        fifo_priority = applied.fifo_priority,
+        locked_kb = applied.locked_kb,
+        threads = applied.threads,
+        "[realtime.{stage}] applied"
+    );
+    Ok(())
 }
 
 /// Logs to stderr, filtered by `RUST_LOG` (default `info`), each line tagged with the

@@ -8,6 +8,11 @@
 //! 4. the same scenario recorded as JPEG (quality 95) replayed at its own rate: the
 //!    decode cost PNG and JPEG recordings put on the end-to-end clock.
 //!
+//! `--realtime FILE` runs every row a second time with `--config FILE` (a `[realtime]`
+//! section: CPU affinity, SCHED_FIFO, locked memory), interleaved with the plain one and
+//! labelled with the file's name: e.g. `no-priorities.toml` with `mode = "off"`
+//! measures the default priorities against none in one run.
+//!
 //! Each run is repeated `--repeats` times (3 by default; one run of a 2-core machine
 //! shared with other work is not a measurement) and each figure is the median over the
 //! repeats, printed with their range and beside the committed one
@@ -44,6 +49,10 @@ struct Args {
     /// Runs of each row; each figure is the median over them.
     #[arg(long, default_value_t = 3)]
     repeats: usize,
+    /// Also run every row with `--config FILE` (its `[realtime]` priorities), labelled
+    /// with the file's name.
+    #[arg(long, value_name = "FILE")]
+    realtime: Option<PathBuf>,
 }
 
 const ROOT: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/..");
@@ -141,7 +150,7 @@ fn main() -> Result<()> {
     simulate(&s("rec_jpeg"), &["--jpeg-quality", "95"])?;
     // (label, `dualgeo run` arguments before --out, CPU figure, traced)
     let (rec, rec_jpeg) = (s("rec"), s("rec_jpeg"));
-    let rows: [(&str, Vec<&str>, bool, bool); 4] = [
+    let base: [(&str, Vec<&str>, bool, bool); 4] = [
         ("live simulator", vec!["--duration-s", &d], false, true),
         ("replay, realtime", vec!["--source", &rec], false, true),
         (
@@ -157,6 +166,27 @@ fn main() -> Result<()> {
             false,
         ),
     ];
+    let realtime = match &args.realtime {
+        Some(path) => {
+            let full = path
+                .canonicalize()
+                .with_context(|| format!("--realtime {}", path.display()))?;
+            let name = full
+                .file_stem()
+                .map_or("realtime".into(), |s| s.to_string_lossy().into_owned());
+            Some((full.display().to_string(), name))
+        }
+        None => None,
+    };
+    let mut rows: Vec<(String, Vec<&str>, bool, bool)> = Vec::new();
+    for (label, extra, with_cpu, traced) in &base {
+        rows.push((label.to_string(), extra.clone(), *with_cpu, *traced));
+        if let Some((config, name)) = &realtime {
+            let mut with = extra.clone();
+            with.extend(["--config", config.as_str()]);
+            rows.push((format!("{label} [{name}]"), with, *with_cpu, false));
+        }
+    }
     // Each row's figures, one list per repeat; the rows interleaved so that a slow
     // spell of the machine falls on every row alike.
     let mut per_row: Vec<Vec<Vec<Figure>>> = vec![Vec::new(); rows.len()];
@@ -221,18 +251,26 @@ fn main() -> Result<()> {
         ));
     }
     // The budgets from the first repeat's traces.
+    let traced = |label: &str| {
+        let i = rows.iter().position(|r| r.0 == label).unwrap_or(0);
+        scratch.join(format!("row{i}-0.trace.json"))
+    };
     let budgets = [
-        ("live simulator", scratch.join("row0-0.trace.json")),
-        ("replay, realtime", scratch.join("row1-0.trace.json")),
+        ("live simulator", traced("live simulator")),
+        ("replay, realtime", traced("replay, realtime")),
     ]
     .map(|(label, path)| -> Result<(String, String)> {
         Ok((label.to_string(), budget::table(&budget::read(&path)?)))
     });
     println!("\n{table}");
+    let with = args
+        .realtime
+        .as_ref()
+        .map_or(String::new(), |p| format!(" --realtime {}", p.display()));
     let mut docs = format!(
-        "Measured by `cargo run --release -p dualgeo-bench --bin pipeline -- --duration-s {d}` \
-         (640×480, 8 images, the default estimator, this 2-core machine; each row run {n} \
-         times, interleaved: the median and the range). \"committed\" is \
+        "Measured by `cargo run --release -p dualgeo-bench --bin pipeline -- --duration-s {d}{with}` \
+         (640×480, 8 images, the default estimator and priorities, this 2-core machine; each \
+         row run {n} times, interleaved: the median and the range). \"committed\" is \
          bench/baselines/pipeline.json.\n\n{table}",
         n = args.repeats
     );

@@ -52,7 +52,7 @@ use iceoryx2::prelude::EventId;
 use shared_types::clock::{elapsed_us, monotonic_ns};
 use shared_types::conventions::Uav;
 use shared_types::messages::{FrameHeader, PixelFormat};
-use shared_types::shell::{init_tracing, ServiceArgs, StatsSaver};
+use shared_types::shell::{apply_realtime, init_tracing, ServiceArgs, StatsSaver};
 use shared_types::stats::StageStats;
 use shared_types::transport::{Endpoint, FramePublisher, Ipc, Stage, END_OF_STREAM_EVENT};
 use std::path::PathBuf;
@@ -182,6 +182,9 @@ fn count_source(source: &mut dyn FrameSource, stats: &mut StageStats) {
 fn main() -> Result<()> {
     let args = Args::parse();
     init_tracing("acquisition");
+    // Before the source starts its threads: they inherit it (the simulator's renderer
+    // goes back to the normal scheduler, `source::render_pool`).
+    apply_realtime(args.service.config.as_deref(), "acquisition")?;
     let rate = parse_rate(&args.rate)?;
     let mut source = acquisition::source::open(&args.source, &args.scenario)?;
     let (width, height) = source.size();

@@ -125,7 +125,9 @@ pub struct SimSource {
 /// CPU the pipeline leaves; a pair it renders late is counted (`pairs_behind`).
 pub const RENDER_NICE: i32 = 10;
 
-/// One thread at [`RENDER_NICE`] (nice is per thread on Linux, and the thread the
+/// One thread at [`RENDER_NICE`] under the normal scheduler (a `[realtime.acquisition]`
+/// SCHED_FIFO priority is the service's, not the camera's: under it nice would mean
+/// nothing and the renderer would take a core from the pipeline). Nice is per thread on Linux, and the thread the
 /// simulator starts for its second view inherits it). One, not two: every pair then
 /// renders and degrades on the same thread, so its allocations stay in one malloc
 /// arena (with two, the second thread's arena grew mid-run and the soak test saw
@@ -136,9 +138,14 @@ fn render_pool() -> Option<rayon::ThreadPool> {
         .num_threads(1)
         .thread_name(|i| format!("render-{i}"))
         .start_handler(|_| {
-            // SAFETY: setpriority on the calling thread's id (gettid) only changes
-            // this thread's nice value; a failure (no permission) leaves it as it was.
+            // SAFETY: sched_setscheduler(0, SCHED_OTHER) and setpriority on the
+            // calling thread's id (gettid) only change this thread's policy and nice
+            // value; a failure (no permission) leaves it as it was.
             unsafe {
+                let normal = libc::sched_param { sched_priority: 0 };
+                if libc::sched_setscheduler(0, libc::SCHED_OTHER, &normal) != 0 {
+                    tracing::debug!("the renderer keeps the service's scheduling policy");
+                }
                 let tid = libc::syscall(libc::SYS_gettid) as libc::id_t;
                 if libc::setpriority(libc::PRIO_PROCESS, tid, RENDER_NICE) != 0 {
                     tracing::debug!("the renderer keeps the service's priority");

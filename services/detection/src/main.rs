@@ -27,7 +27,9 @@ use shared_types::conventions::Uav;
 use shared_types::lens::Distortion;
 use shared_types::messages::{DetectionMsg, EstimateMsg};
 use shared_types::service_names::Topic;
-use shared_types::shell::{init_tracing, load_section, serve, SeqGaps, ServiceArgs, StatsSaver};
+use shared_types::shell::{
+    apply_realtime, init_tracing, load_section, serve, SeqGaps, ServiceArgs, StatsSaver,
+};
 use shared_types::stats::StageStats;
 use shared_types::transport::{Endpoint, Stage};
 
@@ -41,6 +43,7 @@ struct Args {
 fn main() -> Result<()> {
     let args = Args::parse();
     init_tracing("detection");
+    apply_realtime(args.service.config.as_deref(), "detection")?;
     let config: ColourBlobConfig = load_section(args.service.config.as_deref(), "detection")?;
     let gate_config = config.gate;
     let mut detector = TrackedDetector::new(config).context("detector configuration")?;

@@ -24,7 +24,9 @@ use shared_types::checkpoint;
 use shared_types::clock::{elapsed_us, monotonic_ns};
 use shared_types::messages::{EstimateMsg, ObservationSetMsg};
 use shared_types::service_names::Topic;
-use shared_types::shell::{init_tracing, load_section, serve, SeqGaps, ServiceArgs, StatsSaver};
+use shared_types::shell::{
+    apply_realtime, init_tracing, load_section, serve, SeqGaps, ServiceArgs, StatsSaver,
+};
 use shared_types::stats::StageStats;
 use shared_types::transport::{Endpoint, Stage};
 
@@ -71,6 +73,7 @@ fn resume(
 fn main() -> Result<()> {
     let args = Args::parse();
     init_tracing("geolocation");
+    apply_realtime(args.service.config.as_deref(), "geolocation")?;
     let config: EstimatorConfig = load_section(args.service.config.as_deref(), "estimator")?;
     config.validate().context("[estimator] configuration")?;
     let endpoint = Endpoint::new(&args.service.run_id, "geolocation")?;

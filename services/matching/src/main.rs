@@ -37,7 +37,7 @@ use shared_types::conventions::Uav;
 use shared_types::messages::{DetectionMsg, ObservationSetMsg};
 use shared_types::service_names::Topic;
 use shared_types::shell::{
-    init_tracing, load_section, serve, SeqGaps, ServiceArgs, StatsSaver, Wake,
+    apply_realtime, init_tracing, load_section, serve, SeqGaps, ServiceArgs, StatsSaver, Wake,
 };
 use shared_types::transport::{Endpoint, FrameSubscriber, Stage};
 
@@ -94,6 +94,7 @@ fn main() -> Result<()> {
     let args = Args::parse();
     init_tracing("matching");
     let path = args.service.config.as_deref();
+    apply_realtime(path, "matching")?;
     let config: MatchingConfig = load_section(path, "matching")?;
     let estimator: EstimatorConfig = load_section(path, "estimator")?;
     let mut intake = Intake::new(config.clone(), estimator)?;

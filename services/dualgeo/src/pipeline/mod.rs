@@ -57,7 +57,8 @@ pub struct RunArgs {
     /// Output directory (created; existing outputs in it are replaced).
     #[arg(long, default_value = "dualgeo-out")]
     pub out: PathBuf,
-    /// Configuration: TOML with [matching], [estimator] and [detection] sections.
+    /// Configuration: TOML with [matching], [estimator], [detection] and [realtime]
+    /// sections.
     #[arg(long)]
     pub config: Option<PathBuf>,
     /// Seconds to wait for the services to connect.
@@ -99,12 +100,13 @@ fn check_config(path: &Path) -> Result<()> {
         .validate()
         .context("[estimator]")?;
     load_section::<detection::ColourBlobConfig>(Some(path), "detection")?;
+    load_section::<shared_types::realtime::RealtimeConfig>(Some(path), "realtime")?.validate()?;
     let text = std::fs::read_to_string(path)?;
     let table: toml::Table = toml::from_str(&text)?;
     for key in table.keys() {
-        if !["matching", "estimator", "detection"].contains(&key.as_str()) {
+        if !["matching", "estimator", "detection", "realtime"].contains(&key.as_str()) {
             bail!(
-                "{}: unknown section [{key}] (expected matching, estimator, detection)",
+                "{}: unknown section [{key}] (expected matching, estimator, detection, realtime)",
                 path.display()
             );
         }
