@@ -30,8 +30,8 @@ use std::sync::Mutex;
 pub const WARM_UP_S: f64 = 10.0;
 
 /// Bumped when the code changes what a run gives for the same inputs, so cached runs
-/// of an older build are not reused.
-const RUN_FORMAT: u32 = 8;
+/// of an older build are not reused (9: the start counts the current pair once).
+const RUN_FORMAT: u32 = 9;
 /// The same for what changes only runs under correlated (Gauss–Markov) navigation
 /// errors: 9 = the temporal filter's tilt consider states and keyframe ageing, which
 /// exist only with a correlated-error block (white runs are bit-identical, checked on
