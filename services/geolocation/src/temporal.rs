@@ -477,35 +477,6 @@ impl TemporalEstimator {
     }
 
     /// Residual, its measurement covariance and its Jacobian over the whole state.
-    /// The Gaussian log-likelihood of `rows` of `rays` at the prediction (s, P):
-    /// −½ (rᵀ S⁻¹ r + ln det S) of their stacked innovation; `None` if a ray cannot be
-    /// linearised or S is not positive definite.
-    fn log_likelihood(
-        &self,
-        rays: &[Ray],
-        rows: &[usize],
-        s: &DVector<f64>,
-        p: &DMatrix<f64>,
-    ) -> Option<f64> {
-        if rows.is_empty() {
-            return Some(0.0);
-        }
-        let (m, n) = (rows.len() * 2, s.len());
-        let mut h = DMatrix::<f64>::zeros(m, n);
-        let mut r = DVector::<f64>::zeros(m);
-        let mut rc = DMatrix::<f64>::zeros(m, m);
-        for (row, &i) in rows.iter().enumerate() {
-            let (rk, ck, hk) = self.linearise(&rays[i], s)?;
-            r.rows_mut(2 * row, 2)
-                .copy_from(&DVector::from_column_slice(rk.as_slice()));
-            h.view_mut((2 * row, 0), (2, n)).copy_from(&hk);
-            rc.view_mut((2 * row, 2 * row), (2, 2)).copy_from(&ck);
-        }
-        let chol = (&h * p * h.transpose() + rc).cholesky()?;
-        let ln_det = 2.0 * chol.l().diagonal().iter().map(|v| v.ln()).sum::<f64>();
-        Some(-0.5 * (r.dot(&chol.solve(&r)) + ln_det))
-    }
-
     fn linearise(
         &self,
         ray: &Ray,
@@ -986,10 +957,10 @@ impl TemporalEstimator {
         if starting {
             accepted.retain(|&i| i >= 2);
         }
-        let mut log_likelihood = self.log_likelihood(&rays, &accepted, &s, &p).unwrap_or(0.0);
         let mut s_iter = s.clone();
         let mut gain_h = None;
-        for _ in 0..3 {
+        let mut log_likelihood = 0.0;
+        for iteration in 0..3 {
             let m = accepted.len() * 2;
             if m == 0 {
                 break;
@@ -1013,6 +984,14 @@ impl TemporalEstimator {
                 break;
             }
             let sm = &h * &p * h.transpose() + &rc;
+            if iteration == 0 {
+                // At the prediction (s_iter = prior): −½ (rᵀ S⁻¹ r + ln det S).
+                let Some(chol) = sm.clone().cholesky() else {
+                    break;
+                };
+                let ln_det = 2.0 * chol.l().diagonal().iter().map(|v| v.ln()).sum::<f64>();
+                log_likelihood = -0.5 * (r.dot(&chol.solve(&r)) + ln_det);
+            }
             let Some(sinv) = sm.try_inverse() else { break };
             let mut k = &p * h.transpose() * sinv;
             for &c in &consider {
