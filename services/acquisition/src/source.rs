@@ -127,9 +127,9 @@ pub const RENDER_NICE: i32 = 10;
 
 /// One thread at [`RENDER_NICE`] under the normal scheduler (a `[realtime.acquisition]`
 /// SCHED_FIFO priority is the service's, not the camera's: under it nice would mean
-/// nothing and the renderer would take a core from the pipeline). Nice is per thread on Linux, and the thread the
-/// simulator starts for its second view inherits it). One, not two: every pair then
-/// renders and degrades on the same thread, so its allocations stay in one malloc
+/// nothing and the renderer would take a core from the pipeline). Nice is per thread
+/// on Linux, and the thread the simulator starts for its second view inherits it.
+/// One, not two: every pair then renders and degrades on the same thread, so its allocations stay in one malloc
 /// arena (with two, the second thread's arena grew mid-run and the soak test saw
 /// acquisition's memory step by two frames). `None` when the pool cannot be built:
 /// the renderer then runs at the service's own priority.
