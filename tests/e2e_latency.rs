@@ -4,6 +4,8 @@
 //! end-to-end interval (capture → published); and the clock is the honest one: a
 //! pair's capture is its due time on the replay clock and its decoding starts no
 //! earlier, so decoding is inside the end-to-end time and the pacing wait is not.
+//! Keyframe work (ORB, matching with past images) is on matching's refresh lane, never
+//! on an estimate's path (issue #24).
 
 #[path = "support/scratch.rs"]
 mod scratch;
@@ -95,6 +97,11 @@ fn every_span_nests_in_its_estimates_end_to_end_and_capture_is_the_due_time() {
         };
         let name = e["name"].as_str().unwrap_or_default();
         names.insert(name.to_string());
+        // The refresh thread's work carries the frame it refreshed, and lands later:
+        // it is not on that pair's path (checked below).
+        if name.starts_with("refresh") {
+            continue;
+        }
         let (a, b) = if e["ph"] == "X" {
             (ts(e), ts(e) + e["dur"].as_f64().expect("dur"))
         } else {
@@ -125,17 +132,36 @@ fn every_span_nests_in_its_estimates_end_to_end_and_capture_is_the_due_time() {
         "publish",
         "wait",
         "detect",
-        "orb",
         "track",
         "match_pair",
         "past",
-        "match",
         "F",
         "transfer",
         "estimate",
         "end_to_end",
     ] {
         assert!(names.contains(want), "no {want} span: {names:?}");
+    }
+    // Issue #24: no keyframe work (ORB, Hamming matching with a past image) on any
+    // estimate's path; it runs on matching's refresh thread, a lane of its own.
+    for absent in ["orb", "match"] {
+        assert!(!names.contains(absent), "{absent} on the per-pair path");
+    }
+    let matching_pid = events
+        .iter()
+        .find(|e| e["name"] == "process_name" && e["args"]["name"] == "matching")
+        .map(|e| e["pid"].clone())
+        .expect("matching's pid");
+    let refresh_lane: BTreeSet<&str> = events
+        .iter()
+        .filter(|e| e["ph"] == "X" && e["pid"] == matching_pid && e["tid"] == 5)
+        .filter_map(|e| e["name"].as_str())
+        .collect();
+    for want in ["refresh", "refresh_orb", "refresh_match", "refresh_F"] {
+        assert!(
+            refresh_lane.contains(want),
+            "no {want} on the refresh lane: {refresh_lane:?}"
+        );
     }
     assert!(
         checked > 20 * e2e.len(),

@@ -4,9 +4,11 @@
 //! spent their time on.
 //!
 //! Steps, in order: acquisition `decode` (or `render`) and `publish`; the wait for
-//! detection and `detect` (the later of the two UAVs); the wait for matching and `orb`
-//! (the later UAV); `match_pair` (past-image matching, F, transfer, admission); the
-//! wait for geolocation and `estimate`. `other` is what the steps leave unexplained:
+//! detection and `detect` (the later of the two UAVs); the wait for matching and
+//! `track` (`orb` with tracking off; the later UAV); `match_pair` (F from tracked correspondences, transfer); the
+//! wait for geolocation and `estimate`. Matching's refresh thread (ORB and matching
+//! with past images, issue #24) is on no estimate's path; its lane is summarised
+//! apart ([`refresh_lane`]). `other` is what the steps leave unexplained:
 //! time between them (a detection done before matching took it up, matching waiting
 //! for the other UAV's detection) and scheduling.
 
@@ -120,6 +122,40 @@ pub fn read(path: &Path) -> Result<Vec<PairBudget>> {
     Ok(out)
 }
 
+/// The durations (µs) of matching's refresh thread's jobs in a trace (its own lane,
+/// off every estimate's path: `matching::chain::refresh`).
+pub fn refreshes(path: &Path) -> Result<Vec<f64>> {
+    let doc: Value = serde_json::from_slice(
+        &std::fs::read(path).with_context(|| format!("read {}", path.display()))?,
+    )?;
+    let events = doc["traceEvents"]
+        .as_array()
+        .context("no traceEvents in the trace")?;
+    let matching = events
+        .iter()
+        .find(|e| e["name"] == "process_name" && e["args"]["name"] == "matching")
+        .map(|e| e["pid"].clone());
+    Ok(events
+        .iter()
+        .filter(|e| {
+            e["ph"] == "X" && e["name"] == "refresh" && Some(&e["pid"]) == matching.as_ref()
+        })
+        .filter_map(|e| e["dur"].as_f64())
+        .collect())
+}
+
+/// One line on the refresh lane: how many jobs, their p50 and p99.
+pub fn refresh_lane(durations: &[f64]) -> String {
+    let mut v = durations.to_vec();
+    v.sort_by(f64::total_cmp);
+    format!(
+        "Refresh thread (off the critical path): {} refreshes, p50 {:.2} ms, p99 {:.2} ms.",
+        v.len(),
+        percentile(&v, 0.5) / 1e3,
+        percentile(&v, 0.99) / 1e3
+    )
+}
+
 /// The `q` quantile of ascending `sorted` (the nearest rank; NaN when empty).
 pub fn percentile(sorted: &[f64], q: f64) -> f64 {
     if sorted.is_empty() {
@@ -190,5 +226,27 @@ mod tests {
         assert_eq!(b[0].steps[3], 6.0, "the later UAV's");
         assert_eq!(b[0].steps[STEPS.len() - 1], 14.0);
         assert!(table(&b).contains("| decode or render | 0.01 |"));
+    }
+
+    #[test]
+    fn the_refresh_lane_counts_matchings_refresh_jobs_only() {
+        let doc = json!({"traceEvents": [
+            {"name": "process_name", "ph": "M", "pid": 3, "args": {"name": "matching"}},
+            {"name": "process_name", "ph": "M", "pid": 2, "args": {"name": "detection"}},
+            {"name": "refresh", "ph": "X", "pid": 3, "tid": 5, "ts": 0.0, "dur": 20000.0, "args": {"pair": 5}},
+            {"name": "refresh", "ph": "X", "pid": 3, "tid": 5, "ts": 40000.0, "dur": 30000.0, "args": {"pair": 11}},
+            {"name": "refresh_orb", "ph": "X", "pid": 3, "tid": 5, "ts": 0.0, "dur": 5000.0, "args": {"pair": 5}},
+            {"name": "refresh", "ph": "X", "pid": 2, "tid": 0, "ts": 0.0, "dur": 1.0, "args": {"pair": 5}},
+        ]});
+        let path = std::env::temp_dir().join(format!("lane-test-{}.json", std::process::id()));
+        std::fs::write(&path, doc.to_string()).unwrap();
+        let d = refreshes(&path).unwrap();
+        let _ = std::fs::remove_file(&path);
+        assert_eq!(d, vec![20000.0, 30000.0]);
+        assert!(
+            refresh_lane(&d).contains("2 refreshes, p50 30.00 ms"),
+            "{}",
+            refresh_lane(&d)
+        );
     }
 }

@@ -33,6 +33,11 @@ pub struct ServiceArgs {
     /// no spans are kept.
     #[arg(long)]
     pub trace_dir: Option<PathBuf>,
+    /// The source waits for every pair to be acknowledged (`dualgeo run --rate max`):
+    /// work handed between a service's threads then lands on fixed frames, so that a
+    /// replay repeats exactly.
+    #[arg(long)]
+    pub flow_controlled: bool,
 }
 
 impl ServiceArgs {

@@ -260,7 +260,9 @@ fn main() -> Result<()> {
         ("replay, realtime", traced("replay, realtime")),
     ]
     .map(|(label, path)| -> Result<(String, String)> {
-        Ok((label.to_string(), budget::table(&budget::read(&path)?)))
+        let lane = budget::refresh_lane(&budget::refreshes(&path)?);
+        let t = budget::table(&budget::read(&path)?);
+        Ok((label.to_string(), format!("{t}\n{lane}\n")))
     });
     println!("\n{table}");
     let with = args

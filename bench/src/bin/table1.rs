@@ -72,6 +72,22 @@ struct Args {
     worst: usize,
 }
 
+/// One row of the time split: median / p90 / p99 of `v` (µs), in ms.
+fn print_times(name: &str, v: &[f64]) {
+    let mut v = v.to_vec();
+    v.sort_by(f64::total_cmp);
+    if v.is_empty() {
+        return;
+    }
+    let q = |p: f64| v[((v.len() - 1) as f64 * p).round() as usize] / 1e3;
+    println!(
+        "  {name:26} {:7.2} / {:7.2} / {:7.2}",
+        q(0.5),
+        q(0.9),
+        q(0.99)
+    );
+}
+
 fn main() -> Result<()> {
     let args = Args::parse();
     let config = Presets::builtin().get("table1")?;
@@ -137,6 +153,8 @@ fn main() -> Result<()> {
     let mut before: [Vec<f64>; 3] = Default::default();
     let mut after: [Vec<f64>; 3] = Default::default();
     let mut steps: [Vec<f64>; 6] = Default::default();
+    // The refreshes' work (the service's refresh thread), per pair that ran one.
+    let mut refreshes: Vec<f64> = Vec::new();
     let mut outcomes = BTreeMap::<String, usize>::new();
     // (3-D error, t, error vector, past images kept by the filter, past points,
     // detector error in the current left and right images)
@@ -176,6 +194,9 @@ fn main() -> Result<()> {
             })
             .collect::<Result<_>>()?;
         let result = chain.process(&inputs[0], &inputs[1])?;
+        if result.timing.refresh_us > 0.0 {
+            refreshes.push(result.timing.refresh_us);
+        }
         let target = Point3::from(step.frames[0].target);
         let key = match &result.outcome {
             ChainOutcome::NoDetection => "no detection".to_string(),
@@ -295,9 +316,9 @@ fn main() -> Result<()> {
             d.x, d.y, d.z, det[0], det[1]
         );
     }
-    println!("\ntime per geolocation, one thread (median / p90, ms):");
+    println!("\ntime per geolocation, one thread, the pair's path (median / p90 / p99, ms):");
     for (i, name) in [
-        "ORB, current pair",
+        "track (ORB, tracking off)",
         "matching (2 x 6)",
         "F / E estimation (2 x 6)",
         "epipolar transfer",
@@ -307,15 +328,13 @@ fn main() -> Result<()> {
     .iter()
     .enumerate()
     {
-        let mut v = steps[i].clone();
-        v.sort_by(f64::total_cmp);
-        if !v.is_empty() {
-            println!(
-                "  {name:26} {:7.2} / {:7.2}",
-                v[v.len() / 2] / 1e3,
-                v[v.len() * 9 / 10] / 1e3
-            );
-        }
+        print_times(name, &steps[i]);
     }
+    println!(
+        "the refresh thread's work (ORB, matching with past images), {} refreshes on {} pairs:",
+        refreshes.len(),
+        steps[5].len()
+    );
+    print_times("refresh, per pair that ran one", &refreshes);
     Ok(())
 }

@@ -141,9 +141,15 @@ pub struct MatchingConfig {
     /// (`frame_tracking.rs`, issue #15); F is still fitted afresh on every frame. Off =
     /// ORB and matching on every frame, as before.
     pub track_between_orb: bool,
-    /// ORB and Hamming matching at least every this many frames of a UAV while
-    /// tracking.
+    /// ORB and Hamming matching (a *refresh*, `chain/refresh.rs`) at least every this
+    /// many frames of a UAV while tracking.
     pub track_refresh_frames: u32,
+    /// A refresh runs beside the per-pair path and lands this many frames after the
+    /// frame it was taken on, in a replay at `--rate max` and in the evaluation (so
+    /// both repeat exactly); live, it lands on the first frame after it finishes.
+    /// 0 = on the frame itself (the pair waits for it: the refresh is back on the
+    /// critical path).
+    pub refresh_landing_frames: u32,
     /// Ground inliers of each past image's fit handed to the tracker (a stride through
     /// them), at most.
     pub track_points_per_image: usize,
@@ -191,6 +197,7 @@ impl Default for MatchingConfig {
             border_px: 2.0,
             track_between_orb: true,
             track_refresh_frames: 6,
+            refresh_landing_frames: 2,
             track_points_per_image: 150,
             track_min_inliers: 30,
             track_ransac_px: 1.0,
@@ -240,6 +247,7 @@ impl MatchingConfig {
             && self.min_line_angle_deg >= 0.0
             && self.border_px >= 0.0
             && (1..=1000).contains(&self.track_refresh_frames)
+            && self.refresh_landing_frames <= crate::frame_tracking::MAX_LANDING_FRAMES
             && (8..=10_000).contains(&self.track_points_per_image)
             && self.track_min_inliers >= 8
             && self.track_ransac_px > 0.0

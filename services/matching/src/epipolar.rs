@@ -24,11 +24,28 @@ use shared_types::lens::Distortion;
 /// Why a past image gave no corresponding point (counted per reason).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum MatchReject {
-    TooFewMatches { matches: usize },
+    TooFewMatches {
+        matches: usize,
+    },
     FundamentalFailed,
-    TooFewInliers { inliers: usize },
-    NearParallelLines { angle_deg: f64 },
-    OutsideImage { u: f64, v: f64 },
+    TooFewInliers {
+        inliers: usize,
+    },
+    NearParallelLines {
+        angle_deg: f64,
+    },
+    OutsideImage {
+        u: f64,
+        v: f64,
+    },
+    /// A current side has nothing tracked to this past image yet (warm-up, a lost
+    /// track, a newly selected keyframe) and its refresh has not landed: the pair is
+    /// answered without it rather than wait (`chain/refresh.rs`).
+    AwaitingRefresh,
+    /// The last refresh fitted this past image, but not on the level ground plane
+    /// (the 5-point fallback): there are no ground points for tracking to follow
+    /// until the next refresh.
+    NoGroundSeeds,
 }
 
 impl MatchReject {
@@ -39,6 +56,8 @@ impl MatchReject {
             MatchReject::TooFewInliers { .. } => "too_few_inliers",
             MatchReject::NearParallelLines { .. } => "near_parallel_lines",
             MatchReject::OutsideImage { .. } => "outside_image",
+            MatchReject::AwaitingRefresh => "awaiting_refresh",
+            MatchReject::NoGroundSeeds => "no_ground_seeds",
         }
     }
 }

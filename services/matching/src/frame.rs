@@ -108,11 +108,15 @@ pub struct ChainCounts {
     pub keypoints_outside_lens: u64,
     /// Current frames whose detection could not be undistorted.
     pub detections_outside_lens: u64,
-    /// Tracked frames that needed ORB after all, when their pair was matched (a past
-    /// image without a chained homography, or an admission the tracker did not foresee).
-    pub late_orb: u64,
     /// Past-image sides whose homography was carried by tracking (no ORB, no fit).
     pub chained_sides: u64,
+    /// Refreshes landed (`chain/refresh.rs`).
+    pub refreshes: u64,
+    /// Of those with ground points, the ones the tracker could not take (the frame no
+    /// longer kept, too few followed): the old epoch went on.
+    pub refresh_not_followed: u64,
+    /// Refreshes OpenCV refused (the frame is lost to the refresh, the chain goes on).
+    pub refresh_failed: u64,
 }
 
 impl std::ops::AddAssign for ChainCounts {
@@ -122,8 +126,10 @@ impl std::ops::AddAssign for ChainCounts {
         self.fast_threshold_lowered += c.fast_threshold_lowered;
         self.keypoints_outside_lens += c.keypoints_outside_lens;
         self.detections_outside_lens += c.detections_outside_lens;
-        self.late_orb += c.late_orb;
         self.chained_sides += c.chained_sides;
+        self.refreshes += c.refreshes;
+        self.refresh_not_followed += c.refresh_not_followed;
+        self.refresh_failed += c.refresh_failed;
     }
 }
 

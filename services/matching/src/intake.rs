@@ -71,17 +71,25 @@ fn input<'a>(header: &FrameHeader, mat: &'a opencv::core::Mat) -> FrameInput<'a>
     }
 }
 
-fn meta(header: &FrameHeader, detection: &DetectionMsg) -> FrameMeta {
+/// What a frame's header says, without a detection.
+fn frame_meta(header: &FrameHeader) -> FrameMeta {
     let [fx, fy, cx, cy] = header.intrinsics;
     FrameMeta {
         seq: header.seq,
         t_s: header.t_s,
         pose: header.pose,
-        detection: (detection.found == 1).then_some(detection.centre),
+        detection: None,
         intrinsics: Intrinsics::new(fx, fy, cx, cy),
         distortion: Distortion(header.distortion),
         width: header.width,
         height: header.height,
+    }
+}
+
+fn meta(header: &FrameHeader, detection: &DetectionMsg) -> FrameMeta {
+    FrameMeta {
+        detection: (detection.found == 1).then_some(detection.centre),
+        ..frame_meta(header)
     }
 }
 
@@ -144,18 +152,23 @@ impl Intake {
     pub fn extract(&mut self, views: [Option<FrameView>; 2]) {
         let start = monotonic_ns();
         let [left, right] = views;
-        let chain = &self.chain;
-        let wants = |uav: Uav, view: &Option<FrameView>| {
-            view.is_some_and(|(h, _)| chain.wants_features(uav, h.seq, h.t_s, h.pose.position()))
-        };
-        let want = [wants(Uav::Left, &left), wants(Uav::Right, &right)];
+        // A refresh due on these frames lands first (and may wait for its thread at
+        // `--rate max`: counted in `refresh_wait`).
+        for (uav, view) in [(Uav::Left, &left), (Uav::Right, &right)] {
+            if let Some((h, _)) = view {
+                if let Err(e) = self.chain.before_frame(uav, h.seq) {
+                    tracing::warn!(?uav, "refresh not landed: {e}");
+                    self.stats.count("refresh_failed", 1);
+                }
+            }
+        }
         let [left_tracker, right_tracker] = self.chain.trackers_mut();
-        let observe = |tracker: &mut FrameTracker, view: Option<FrameView>, want: bool| {
+        let observe = |tracker: &mut FrameTracker, view: Option<FrameView>| {
             let Some((header, payload)) = view else {
                 return Ok(None);
             };
             let mat = frame_mat(&header, payload)?;
-            let (observed, counts, report) = tracker.observe(&input(&header, &mat), want)?;
+            let (observed, counts, report) = tracker.observe(&input(&header, &mat))?;
             anyhow::Ok(Some((header, observed, counts, report)))
         };
         // Left on a pool thread, right on this one. The pool's threads live as long as
@@ -166,25 +179,28 @@ impl Intake {
             if left.is_some() && right.is_some() {
                 let mut l = None;
                 let r = rayon::in_place_scope(|scope| {
-                    scope.spawn(|_| l = Some(observe(left_tracker, left, want[0])));
-                    observe(right_tracker, right, want[1])
+                    scope.spawn(|_| l = Some(observe(left_tracker, left)));
+                    observe(right_tracker, right)
                 });
                 (
                     l.unwrap_or_else(|| Err(anyhow::anyhow!("the left ORB task did not run"))),
                     r,
                 )
             } else {
-                (
-                    observe(left_tracker, left, want[0]),
-                    observe(right_tracker, right, want[1]),
-                )
+                (observe(left_tracker, left), observe(right_tracker, right))
             };
         let orb_end = monotonic_ns();
         let orb_us = elapsed_us(start, orb_end);
         for (uav, result) in [l, r].into_iter().enumerate() {
             match result {
-                Ok(Some((header, observed, counts, report))) => {
+                Ok(Some((header, mut observed, counts, report))) => {
                     self.chain.add_counts(&counts);
+                    let side = [Uav::Left, Uav::Right][uav];
+                    let frame = frame_meta(&header);
+                    if let Err(e) = self.chain.after_observe(side, &frame, &mut observed) {
+                        tracing::warn!(uav, "refresh not asked for: {e}");
+                        self.stats.count("refresh_failed", 1);
+                    }
                     let name = if report.orb { "orb" } else { "track" };
                     self.stats.count(
                         if report.orb {
@@ -211,6 +227,48 @@ impl Intake {
                     tracing::warn!(uav, "frame rejected: {e:#}");
                     self.stats.count("bad_frames", 1);
                 }
+            }
+        }
+        self.record_landings();
+    }
+
+    /// The refreshes that landed: `refresh` (the thread's work, µs), `refresh_late`
+    /// (frames from the one it was taken on to the one it landed on), `refresh_wait`
+    /// (a pair waiting for it at `--rate max`), and the trace's refresh lane.
+    fn record_landings(&mut self) {
+        for l in self.chain.take_landings() {
+            let work = l.steps.iter().find(|s| s.name == "refresh");
+            if let Some(w) = work {
+                self.stats
+                    .record("refresh", elapsed_us(w.start_ns, w.end_ns));
+            }
+            self.stats
+                .record("refresh_late", l.landed_seq.saturating_sub(l.taken_seq));
+            if l.waited_us > 0 {
+                self.stats.record("refresh_wait", l.waited_us);
+            }
+            if !self.trace.is_on() {
+                continue;
+            }
+            let uav = Some(l.uav.index() as u8);
+            self.trace.span(
+                "refresh_queued",
+                l.taken_seq,
+                uav,
+                l.submitted_ns,
+                work.map_or(l.finished_ns, |w| w.start_ns),
+            );
+            for st in &l.steps {
+                let name = match st.name {
+                    "refresh" => "refresh",
+                    "orb" => "refresh_orb",
+                    "match" => "refresh_match",
+                    "F" => "refresh_F",
+                    _ => "refresh_other",
+                };
+                let kf = (st.name != "refresh" && st.name != "orb").then_some(st.keyframe);
+                self.trace
+                    .past_span(name, l.taken_seq, Some(st.uav), kf, st.start_ns, st.end_ns);
             }
         }
     }
@@ -280,8 +338,10 @@ impl Intake {
             ("fast_threshold_lowered", c.fast_threshold_lowered),
             ("keypoints_outside_lens", c.keypoints_outside_lens),
             ("detections_outside_lens", c.detections_outside_lens),
-            ("late_orb", c.late_orb),
             ("chained_sides", c.chained_sides),
+            ("refreshes", c.refreshes),
+            ("refresh_not_followed", c.refresh_not_followed),
+            ("refresh_failed", c.refresh_failed),
         ] {
             if n > 0 {
                 self.stats.count(name, n);

@@ -4,10 +4,11 @@
 //! Each UAV keeps a ring of keyframes admitted by the baseline constraint T_re, with ORB
 //! features cached at admission ([`ring`]). For each past image, F_Ln and F_Rn are
 //! estimated from ORB matches, and the current target pixel's epipolar lines meet at
-//! its corresponding point ([`epipolar`], eq. 24–28). Between ORB frames each camera
-//! is tracked frame to frame and the fitted homographies are carried along
-//! ([`frame_tracking`]). [`chain`] runs everything, through the consistency filter and
-//! the estimator.
+//! its corresponding point ([`epipolar`], eq. 24–28). Each camera's ground points are
+//! tracked frame to frame ([`frame_tracking`]), and every pair is answered from them;
+//! ORB, matching with past images and admissions run as *refreshes* on a thread of
+//! their own and land at a frame boundary (`chain/refresh.rs`, issue #24). [`chain`]
+//! runs everything, through the consistency filter and the estimator.
 
 pub mod chain;
 pub mod config;

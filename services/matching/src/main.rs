@@ -1,11 +1,14 @@
 //! `dualgeo-matching`: the matching service shell.
 //!
-//! - On a frame: ORB on the pixels in place (a `Mat` over the shared-memory sample), the
-//!   left and right frames of a pair in parallel (the left on a thread of rayon's
-//!   persistent pool); the sample is released as soon as its features exist.
-//! - On a detection: once both frames of a pair have features and both detections are
-//!   in, corresponding-point matching against the keyframe rings (Section 2.3), an
-//!   [`ObservationSetMsg`] to geolocation, then the pair is offered to the rings.
+//! - On a frame: a refresh due lands, then KLT tracking on the pixels in place (a `Mat`
+//!   over the shared-memory sample), the left and right frames of a pair in parallel
+//!   (the left on a thread of rayon's persistent pool); a frame that needs a refresh
+//!   hands its grey copy to the refresh thread (ORB, matching with past images,
+//!   admissions; `--flow-controlled`: refreshes land on fixed frames). The sample is
+//!   released when tracking is done.
+//! - On a detection: once both frames of a pair are tracked and both detections are
+//!   in, corresponding-point matching against the keyframe rings (Section 2.3) from
+//!   the tracked points, and an [`ObservationSetMsg`] to geolocation.
 //!
 //! A slow matching stage keeps only the newest pair: older queued frames are dropped
 //! and counted (`frames_dropped`).
@@ -15,10 +18,14 @@
 //! restarted service refills its rings from them (`keyframes_restored`) and can match
 //! the first complete pair it sees.
 //!
-//! Histograms (µs): `transport`, `wait`, `orb`, `match`, `compute` (orb + match of one
-//! pair), `checkpoint` (keyframe files and index). Counters: `frames`, `pairs`, `sets`,
+//! Histograms (µs): `transport`, `wait`, `track` (`orb` with tracking off), `match`,
+//! `compute` (track + match of one pair), `checkpoint` (keyframe files and index),
+//! `refresh` (the refresh thread's work per job), `refresh_wait` (a pair waiting for a
+//! refresh at `--rate max`); `refresh_late` counts frames from a refresh's frame to
+//! the one it landed on. Counters: `frames`, `pairs`, `sets`,
 //! `frames_lost` (sequence gaps), `frames_dropped`, `no_detection`, `warming_up`,
-//! `past_rejected.<reason>`, `essential_fallback` (past images whose F came from the
+//! `past_rejected.<reason>` (`awaiting_refresh`: nothing tracked to that past image
+//! yet), `refreshes`, `refresh_not_followed`, `refresh_failed`, `essential_fallback` (past images whose F came from the
 //! 5-point E because the dominant plane was not level), and the adaptations of
 //! [`matching::ChainCounts`]: `retried_looser_ratio`, `retry_rescued`,
 //! `fast_threshold_lowered`, `keypoints_outside_lens`, `detections_outside_lens`;
@@ -102,6 +109,11 @@ fn main() -> Result<()> {
     if let Some(dir) = &args.service.state_dir {
         intake.restore(dir, config, estimator)?;
     }
+    // Keyframe work (ORB, matching with past images, admissions) on its own thread.
+    intake
+        .chain
+        .refresh_on_thread(args.service.flow_controlled)
+        .context("start the refresh thread")?;
     let mut gaps = [SeqGaps::default(); 2];
     let mut saver = StatsSaver::new(&args.service);
     let endpoint = Endpoint::new(&args.service.run_id, "matching")?;

@@ -30,13 +30,14 @@ use std::sync::Mutex;
 pub const WARM_UP_S: f64 = 10.0;
 
 /// Bumped when the code changes what a run gives for the same inputs, so cached runs
-/// of an older build are not reused (9: the start counts the current pair once).
-const RUN_FORMAT: u32 = 9;
+/// of an older build are not reused (10: keyframe work off the per-pair path, refreshes
+/// landing two frames late).
+const RUN_FORMAT: u32 = 10;
 /// The same for what changes only runs under correlated (Gauss–Markov) navigation
 /// errors: 9 = the temporal filter's tilt consider states and keyframe ageing, which
 /// exist only with a correlated-error block (white runs are bit-identical, checked on
-/// `default` seed 1).
-const CORRELATED_FORMAT: u32 = 9;
+/// `default` seed 1); 10 with RUN_FORMAT 10.
+const CORRELATED_FORMAT: u32 = 10;
 
 /// The navigation-error models the Monte Carlo runs under.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize, clap::ValueEnum)]

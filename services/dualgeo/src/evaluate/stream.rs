@@ -254,10 +254,8 @@ impl Lane {
             })
             .collect();
         let started = process_cpu_ns();
-        let mut observed = [
-            self.chain.observe(Uav::Left, &inputs[0])?.0,
-            self.chain.observe(Uav::Right, &inputs[1])?.0,
-        ];
+        let [(l, _), (r, _)] = self.chain.observe_pair([&inputs[0], &inputs[1]])?;
+        let mut observed = [l, r];
         let metas = [inputs[0].meta(), inputs[1].meta()];
         let mut timing = matching::ChainTiming::default();
         let mut rejections = Vec::new();

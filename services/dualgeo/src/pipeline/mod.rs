@@ -200,6 +200,9 @@ pub fn run(args: &RunArgs) -> Result<()> {
     if args.trace.is_some() {
         common.extend(["--trace-dir".into(), trace_dir.display().to_string()]);
     }
+    if args.rate == "max" {
+        common.push("--flow-controlled".into());
+    }
     eprintln!(
         "dualgeo run {run_id}: source {}, rate {}, output {}",
         args.source,

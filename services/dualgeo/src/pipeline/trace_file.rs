@@ -4,11 +4,12 @@
 //!
 //! One process per dualgeo process (`pid`), named; work is a complete event (`X`) on a
 //! thread of its process: acquisition's pairs (tid 0), per UAV (tid 1 left, 2 right:
-//! detection, ORB), matching's pair (tid 0) and its past-image jobs on lanes (tid 10 +
-//! the job's place in its pair), geolocation (tid 0). Waits (a message published →
-//! its consumer started on it) and each estimate's end-to-end interval (its capture →
-//! published) overlap from one frame to the next, so they are async events (`b`/`e`,
-//! id = the pair). Times are microseconds from the first span; every event carries its
+//! detection, ORB), matching's pair (tid 0), its past-image jobs on lanes (tid 10 +
+//! the job's place in its pair) and its refresh thread (tid 5: `refresh` and its
+//! steps, keyed by the frame it refreshed), geolocation (tid 0). Waits (a message
+//! published → its consumer started on it, a refresh queued → started) and each
+//! estimate's end-to-end interval (its capture → published) overlap from one frame to
+//! the next, so they are async events (`b`/`e`, id = the pair). Times are microseconds from the first span; every event carries its
 //! pair in `args`.
 
 use anyhow::{Context, Result};
@@ -28,7 +29,7 @@ fn pid(process: &str) -> u64 {
 
 /// Async (overlapping) spans.
 fn is_async(name: &str) -> bool {
-    matches!(name, "wait" | "end_to_end")
+    matches!(name, "wait" | "end_to_end" | "refresh_queued")
 }
 
 /// What `write` wrote.
@@ -59,7 +60,7 @@ pub fn events(spans: &[(String, Span)]) -> Vec<Value> {
     for p in PROCESSES {
         out.push(json!({"name": "process_name", "ph": "M", "pid": pid(p), "args": {"name": p}}));
         out.push(json!({"name": "process_sort_index", "ph": "M", "pid": pid(p), "args": {"sort_index": pid(p)}}));
-        for (tid, name) in [(0, "pairs"), (1, "left"), (2, "right")] {
+        for (tid, name) in [(0, "pairs"), (1, "left"), (2, "right"), (5, "refresh")] {
             out.push(json!({"name": "thread_name", "ph": "M", "pid": pid(p), "tid": tid, "args": {"name": name}}));
         }
     }
@@ -83,6 +84,7 @@ pub fn events(spans: &[(String, Span)]) -> Vec<Value> {
             continue;
         }
         let tid = match (s.keyframe, s.uav) {
+            _ if s.name.starts_with("refresh") => 5,
             (Some(k), Some(u)) => {
                 let key = (s.pair, u, k);
                 let lane = match lanes.get(&key) {

@@ -1,15 +1,18 @@
 //! What the chain knows of each past image between pairs, for each current side: the
 //! last fitted ground homography (the guide of guided matching), the *anchor* of
 //! frame-to-frame tracking (`frame_tracking.rs`: the past image's ground inliers
-//! under the tracker's ids), a failed fit not to retry before the next ORB frame, and
+//! under the tracker's ids), a failed fit not to retry before the next refresh, and
 //! the links that guide a newly selected keyframe through one matched before. From
-//! these the chain decides which frames need ORB (`wants_features`).
+//! these the chain decides which frames to refresh (`wants_refresh`).
 
+use super::refresh::RefreshJob;
 use super::{FrameMeta, VisionChain};
 use crate::epipolar::MatchReject;
-use crate::frame_tracking::{Motion, TrackedPoints};
+use crate::frame::ChainError;
+use crate::frame_tracking::{Motion, Observed, TrackedPoints};
 use nalgebra::Matrix3;
 use opencv::core as cv;
+use shared_types::clock::monotonic_ns;
 use shared_types::conventions::Uav;
 use std::collections::HashMap;
 use std::sync::Arc;
@@ -44,6 +47,28 @@ pub(super) struct Prior {
     pub(super) homography: Matrix3<f64>,
     /// The ground inliers of the last fresh fit, as the tracker follows them.
     pub(super) anchor: Option<Anchor>,
+    /// The anchor before it: live, a pair observed before the last refresh landed
+    /// may still be waiting for its detections, in the epoch before.
+    pub(super) previous: Option<Anchor>,
+}
+
+impl Prior {
+    pub(super) fn new(t_s: f64, homography: Matrix3<f64>) -> Self {
+        Self {
+            t_s,
+            homography,
+            anchor: None,
+            previous: None,
+        }
+    }
+
+    /// The anchor of tracking epoch `epoch`, if it is one of the two kept.
+    fn anchor_of(&self, epoch: u64) -> Option<&Anchor> {
+        [&self.anchor, &self.previous]
+            .into_iter()
+            .flatten()
+            .find(|a| a.epoch == epoch)
+    }
 }
 
 /// A past image's ground inliers handed to the current side's tracker: the tracker's
@@ -55,51 +80,76 @@ pub(super) struct Anchor {
 }
 
 impl VisionChain {
-    /// Whether `frame` of `uav` should run ORB rather than only be tracked: the ring
-    /// may admit it, or a past image it will be matched with has neither an anchor in
-    /// the tracker's epoch nor a failure recorded there. A wrong guess costs time,
-    /// never accuracy: a pair that needs features it lacks gets them late
-    /// ([`super::ChainCounts::late_orb`]).
-    pub fn wants_features(
+    /// The refresh frame `frame` of `uav` needs, if any (none while one is in flight):
+    /// the ring may admit it, tracking has nothing (warm-up, a lost track), the
+    /// cadence is due, or a past image its pair will be matched with has neither an
+    /// anchor in the frame's epoch nor a failure recorded there.
+    pub(super) fn wants_refresh(
         &self,
         uav: Uav,
-        seq: u64,
-        t_s: f64,
-        position: nalgebra::Point3<f64>,
-    ) -> bool {
-        let here = self.predicted_baseline(uav, t_s, position);
-        if self.rings[uav.index()].would_admit(&here) {
-            return true;
+        frame: &FrameMeta,
+        observed: &Observed,
+    ) -> Option<RefreshJob> {
+        let grey = observed.grey()?;
+        if self.refresher.busy(uav) || !self.trackers[uav.index()].enabled() {
+            return None;
         }
+        let here = self.predicted_baseline(uav, frame.t_s, frame.pose.position());
+        let admit = self.rings[uav.index()].would_admit(&here).then_some(here);
         let wanted = self.config.images_per_uav - 1;
-        let mut selections = Vec::with_capacity(2);
+        let mut past = Vec::new();
+        let mut unknown = false;
+        let epoch = observed.motion.as_ref().map(|m| m.epoch);
         for ring_uav in [Uav::Left, Uav::Right] {
             let at = if ring_uav == uav {
-                here
+                Some(here)
             } else {
-                match self.smoothed[ring_uav.index()] {
-                    Some((_, p)) => p,
-                    None => return false,
-                }
+                self.smoothed[ring_uav.index()].map(|(_, p)| p)
             };
-            let selected = self.rings[ring_uav.index()].select(&at, seq, wanted);
+            let selected = match at {
+                Some(at) => self.rings[ring_uav.index()].select(&at, frame.seq, wanted),
+                None => Vec::new(),
+            };
             if selected.len() < wanted {
-                // Warming up: no matching, so no features unless admitted.
-                return false;
+                // Warming up: no matching, so only the features of an admission.
+                past.clear();
+                unknown = false;
+                break;
             }
-            selections.push((ring_uav, selected));
-        }
-        let Some((epoch, _)) = self.trackers[uav.index()].next_step(seq) else {
-            return true;
-        };
-        selections.iter().any(|(ring_uav, selected)| {
-            selected.iter().any(|kf| {
+            // The ring's newest keyframe, too close to be selected yet, is the next to
+            // be: matched now, it has an anchor the moment it is selected, rather than
+            // missing from its first pairs while a refresh runs.
+            let newest = self.rings[ring_uav.index()]
+                .newest()
+                .filter(|n| n.seq < frame.seq && !selected.iter().any(|kf| kf.seq == n.seq));
+            if let Some(n) = newest {
+                let prior = self.guide(uav.index(), ring_uav, n.seq, frame, None).prior;
+                past.push((ring_uav, n.clone(), prior));
+            }
+            for kf in selected {
                 let key = (uav.index(), ring_uav.index(), kf.seq);
                 let anchor = self.priors.get(&key).and_then(|p| p.anchor.as_ref());
-                let known = anchor.is_some_and(|a| a.epoch == epoch)
-                    || self.failed.get(&key).is_some_and(|(e, _)| *e == epoch);
-                !known
-            })
+                let known = epoch.is_some_and(|e| {
+                    anchor.is_some_and(|a| a.epoch == e)
+                        || self.failed.get(&key).is_some_and(|(f, _)| *f == e)
+                });
+                unknown |= !known;
+                let prior = self.guide(uav.index(), ring_uav, kf.seq, frame, None).prior;
+                past.push((ring_uav, kf.clone(), prior));
+            }
+        }
+        let lost = observed.motion.is_none() && !past.is_empty();
+        let due = self.refresher.cadence_due(uav, frame.seq) && !past.is_empty();
+        (admit.is_some() || lost || due || unknown).then(|| RefreshJob {
+            uav,
+            frame: FrameMeta {
+                detection: None,
+                ..*frame
+            },
+            grey: Arc::clone(grey),
+            past,
+            admit,
+            submitted_ns: monotonic_ns(),
         })
     }
 
@@ -128,10 +178,7 @@ impl VisionChain {
         };
         let age = frame.t_s - prior.t_s;
         let fresh = (0.0..=config.guided_max_age_s).contains(&age);
-        let tracked = match (&prior.anchor, motion) {
-            (Some(a), Some(m)) if a.epoch == m.epoch => Some(join(&a.pairs, &m.tracked)),
-            _ => None,
-        };
+        let tracked = motion.and_then(|m| Some(join(&prior.anchor_of(m.epoch)?.pairs, &m.tracked)));
         Guide {
             prior: (fresh && config.guided_radius_px > 0.0).then_some(prior.homography),
             tracked,
@@ -165,18 +212,21 @@ impl VisionChain {
             })
     }
 
-    /// Hands side `side`'s ground inliers (each past image's, current ↔ past) to its
-    /// tracker, keeps each past image's share as its anchor, and records the past
-    /// images whose fit failed so that tracked frames do not ask for ORB again.
+    /// Hands side `side`'s ground inliers (each past image's, current ↔ past, found on
+    /// the refreshed frame `frame`) to its tracker, which follows them to its newest
+    /// frame; keeps each past image's share as its anchor, and records the past images
+    /// whose fit failed so that tracked frames do not ask again before the next
+    /// refresh. Returns the new epoch's motion on the tracker's newest frame, or
+    /// `None` when nothing was handed over (the old epoch goes on).
     pub(super) fn seed(
         &mut self,
         side: usize,
         frame: &FrameMeta,
         seeds: Vec<(PriorKey, SeedPairs)>,
         failures: Vec<(PriorKey, MatchReject)>,
-    ) {
+    ) -> Result<Option<Motion>, ChainError> {
         if seeds.is_empty() {
-            return;
+            return Ok(None);
         }
         // One id per distinct current point (a keypoint can be an inlier with several
         // past images).
@@ -200,21 +250,31 @@ impl VisionChain {
             anchor.dedup_by_key(|(id, _)| *id);
             anchors.push((key, anchor));
         }
-        let epoch =
-            self.trackers[side].seed(frame.seq, &points, &frame.intrinsics, &frame.distortion);
+        let Some((epoch, tracked)) = self.trackers[side].hand_over(
+            frame.seq,
+            &points,
+            &frame.intrinsics,
+            &frame.distortion,
+        )?
+        else {
+            return Ok(None);
+        };
         for (key, pairs) in anchors {
             if let Some(prior) = self.priors.get_mut(&key) {
-                prior.anchor = epoch.map(|epoch| Anchor {
+                prior.previous = prior.anchor.replace(Anchor {
                     epoch,
                     pairs: Arc::new(pairs),
                 });
             }
         }
-        if let Some(epoch) = epoch {
-            for (key, reason) in failures {
-                self.failed.insert(key, (epoch, reason));
-            }
+        for (key, reason) in failures {
+            self.failed.insert(key, (epoch, reason));
         }
+        Ok(Some(Motion {
+            epoch,
+            step: 0,
+            tracked: Arc::new(tracked),
+        }))
     }
 }
 

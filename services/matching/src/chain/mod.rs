@@ -5,15 +5,21 @@
 //! tests and the evaluation harness all call [`VisionChain::process`].
 
 mod anchors;
+mod fresh_fit;
+mod landing;
 mod past;
+mod refresh;
 
-use anchors::{Guide, KeyframeId, Prior, PriorKey, SeedPairs};
+use anchors::{Guide, KeyframeId, Prior, PriorKey};
+pub use landing::LandingReport;
 use past::{match_past, Job, PastResult};
+use refresh::Refresher;
+pub use refresh::{RefreshJob, RefreshResult};
 
 use crate::config::MatchingConfig;
 use crate::epipolar::MatchReject;
 pub use crate::frame::{extract_undistorted, ChainCounts, ChainError, FrameInput, FrameMeta};
-use crate::frame_tracking::{FrameTracker, Observed, TrackReport};
+use crate::frame_tracking::{FrameTracker, Observed};
 use crate::ground_plane::PlaneModel;
 use crate::ring::{Keyframe, KeyframeRing};
 use geolocation::{
@@ -23,7 +29,7 @@ use geolocation::{
 use nalgebra::{Matrix3, Vector2};
 use shared_types::conventions::{Intrinsics, Uav};
 use shared_types::messages::PoseSample;
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, VecDeque};
 use std::time::Instant;
 
 /// The observation set of one pair: what the geolocation stage estimates from.
@@ -116,6 +122,19 @@ pub struct Step {
     pub end_ns: u64,
 }
 
+impl Step {
+    /// A step of `uav` and keyframe `keyframe` from `start_ns` to now.
+    pub(crate) fn since(name: &'static str, uav: Uav, keyframe: u64, start_ns: u64) -> Self {
+        Step {
+            name,
+            uav: uav.index() as u8,
+            keyframe,
+            start_ns,
+            end_ns: shared_types::clock::monotonic_ns(),
+        }
+    }
+}
+
 /// Wall time of each step on the calling thread, microseconds.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct ChainTiming {
@@ -130,6 +149,10 @@ pub struct ChainTiming {
     pub transfer_us: f64,
     /// Consistency filter and the altitude/regression iteration (filtered estimate only).
     pub estimate_us: f64,
+    /// Refreshes run on the calling thread during this pair ([`VisionChain::process`]
+    /// without [`VisionChain::refresh_on_thread`]): in the service that is the refresh
+    /// thread's work, not the pair's, so it is not in `orb_us` nor in the total.
+    pub refresh_us: f64,
 }
 
 impl ChainTiming {
@@ -169,6 +192,13 @@ pub struct VisionChain {
     /// was matched with as a current frame, so that a current frame with a prior for
     /// one of those can be guided to it without brute force.
     links: BTreeMap<KeyframeId, Vec<(KeyframeId, Matrix3<f64>)>>,
+    /// ORB and matching of refreshed frames, off the per-pair path (`refresh.rs`).
+    refresher: Refresher,
+    /// Frames the landed refreshes got admitted to the rings, per UAV, since the last
+    /// [`VisionChain::admit`].
+    landed_admissions: [bool; 2],
+    /// What the last refreshes did ([`VisionChain::take_landings`]).
+    landings: VecDeque<LandingReport>,
 }
 
 fn micros(since: Instant) -> f64 {
@@ -194,30 +224,31 @@ impl VisionChain {
             priors: BTreeMap::new(),
             failed: BTreeMap::new(),
             links: BTreeMap::new(),
+            refresher: Refresher::inline(&config)?,
+            landed_admissions: [false; 2],
+            landings: VecDeque::new(),
             config,
             estimator,
         })
+    }
+
+    /// Runs the refreshes on a thread of their own (the service); `fixed`: they land
+    /// on the frame `refresh_landing_frames` after theirs, waiting if late (a replay at
+    /// `--rate max`, which then repeats exactly), else on the first frame after they
+    /// finish (live). Without this call they run on the calling thread and land as
+    /// with `fixed` (the evaluation, tests).
+    pub fn refresh_on_thread(&mut self, fixed: bool) -> Result<(), ChainError> {
+        self.refresher.start_thread(&self.config, fixed)
     }
 
     pub fn rings(&self) -> &[KeyframeRing; 2] {
         &self.rings
     }
 
-    /// One current frame of `uav`: tracked from the previous one, with ORB when the
-    /// chain foresees that its pair needs it ([`VisionChain::wants_features`]).
-    pub fn observe(
-        &mut self,
-        uav: Uav,
-        frame: &FrameInput,
-    ) -> Result<(Observed, TrackReport), ChainError> {
-        let want = self.wants_features(uav, frame.seq, frame.t_s, frame.pose.position());
-        let (observed, counts, report) = self.trackers[uav.index()].observe(frame, want)?;
-        self.add_counts(&counts);
-        Ok((observed, report))
-    }
-
-    /// The trackers, for a caller that observes both UAVs' frames on two threads (ask
-    /// [`VisionChain::wants_features`] first).
+    /// The trackers, for a caller that observes both UAVs' frames on two threads
+    /// (call [`VisionChain::before_frame`] for both before and
+    /// [`VisionChain::after_observe`] for both after, as
+    /// [`VisionChain::observe_pair`] does).
     pub fn trackers_mut(&mut self) -> &mut [FrameTracker; 2] {
         &mut self.trackers
     }
@@ -261,11 +292,10 @@ impl VisionChain {
     ) -> Result<ChainResult, ChainError> {
         let mut timing = ChainTiming::default();
         let t = Instant::now();
-        let mut observed = [
-            self.observe(Uav::Left, left)?.0,
-            self.observe(Uav::Right, right)?.0,
-        ];
-        timing.orb_us = micros(t);
+        let [(l, _), (r, _)] = self.observe_pair([left, right])?;
+        let mut observed = [l, r];
+        timing.refresh_us = self.refresher.take_inline_us();
+        timing.orb_us = (micros(t) - timing.refresh_us).max(0.0);
         let (left, right) = (left.meta(), right.meta());
         let mut rejections = Vec::new();
         let matched =
@@ -306,27 +336,25 @@ impl VisionChain {
         self.smoothed[uav.index()].map_or(frame.pose.position(), |(_, p)| p)
     }
 
-    /// Offers the current pair to the keyframe rings (the baseline constraint decides).
-    /// Returns, per UAV, whether the frame was admitted. A tracked frame the ring admits
-    /// gets its ORB features now if it has none.
+    /// Offers the current pair to the keyframe rings (the baseline constraint decides)
+    /// when it has ORB features (tracking off; while tracking, a refresh admits frames
+    /// when it lands). Returns, per UAV, whether a frame was admitted since the last
+    /// call, by either.
     pub fn admit(
         &mut self,
         frames: [&FrameMeta; 2],
         observed: &mut [Observed; 2],
     ) -> Result<[bool; 2], ChainError> {
-        let mut admitted = [false; 2];
+        let mut admitted = std::mem::take(&mut self.landed_admissions);
         for uav in [Uav::Left, Uav::Right] {
             let frame = frames[uav.index()];
+            let Some(features) = observed[uav.index()].features.clone() else {
+                continue;
+            };
             let baseline_position = self.baseline_position(uav, frame);
             if !self.rings[uav.index()].would_admit(&baseline_position) {
                 continue;
             }
-            let counts =
-                self.trackers[uav.index()].ensure_features(&mut observed[uav.index()], frame)?;
-            self.counts += counts;
-            let Some(features) = observed[uav.index()].features.clone() else {
-                continue;
-            };
             // The ground homographies fitted on this very frame: its links.
             let links: Vec<(KeyframeId, Matrix3<f64>)> = self
                 .priors
@@ -337,7 +365,7 @@ impl VisionChain {
             if !links.is_empty() {
                 self.links.insert((uav.index(), frame.seq), links);
             }
-            admitted[uav.index()] = self.rings[uav.index()].offer(Keyframe {
+            admitted[uav.index()] |= self.rings[uav.index()].offer(Keyframe {
                 seq: frame.seq,
                 t_s: frame.t_s,
                 pose: frame.pose,
@@ -427,18 +455,6 @@ impl VisionChain {
                 })
             })
             .collect();
-        // A side without features is served by tracking alone only if every past image
-        // has tracked correspondences for it; else ORB runs on it now.
-        let t = Instant::now();
-        for side in 0..2 {
-            let unknown = |g: &[Guide; 2]| g[side].tracked.is_none() && g[side].failed.is_none();
-            if observed[side].features.is_none() && guides.iter().any(unknown) {
-                let counts =
-                    self.trackers[side].ensure_features(&mut observed[side], current[side])?;
-                self.counts += counts;
-            }
-        }
-        timing.orb_us += micros(t);
         let features = [observed[0].features.clone(), observed[1].features.clone()];
         let config = &self.config;
         let features = &features;
@@ -494,9 +510,7 @@ impl VisionChain {
 
         let mut past = Vec::new();
         let mut past_obs = Vec::new();
-        let mut new_priors: Vec<(PriorKey, Prior)> = Vec::new();
-        let mut seeds: [Vec<(PriorKey, SeedPairs)>; 2] = Default::default();
-        let mut failures: [Vec<(PriorKey, MatchReject)>; 2] = Default::default();
+        let mut new_priors: Vec<(PriorKey, f64, Matrix3<f64>)> = Vec::new();
         let mut counts = ChainCounts::default();
         let mut steps = Vec::new();
         for ((uav, kf), r) in jobs.iter().zip(results) {
@@ -515,26 +529,7 @@ impl VisionChain {
             for (side, h) in r.homographies.iter().enumerate() {
                 if let Some(homography) = h {
                     let key = (side, uav.index(), kf.seq);
-                    let anchor = if r.seeds[side].is_empty() {
-                        self.priors.get(&key).and_then(|p| p.anchor.clone())
-                    } else {
-                        None
-                    };
-                    let prior = Prior {
-                        t_s: metas[side].t_s,
-                        homography: *homography,
-                        anchor,
-                    };
-                    new_priors.push((key, prior));
-                }
-            }
-            for side in 0..2 {
-                let key = (side, uav.index(), kf.seq);
-                if !r.seeds[side].is_empty() {
-                    seeds[side].push((key, r.seeds[side].clone()));
-                }
-                if let (true, Err(reason)) = (features[side].is_some(), &r.result) {
-                    failures[side].push((key, *reason));
+                    new_priors.push((key, metas[side].t_s, *homography));
                 }
             }
             if let Ok(m) = &r.result {
@@ -551,9 +546,14 @@ impl VisionChain {
 
         self.counts += counts;
         self.steps = steps;
-        self.priors.extend(new_priors);
-        for (side, (side_seeds, side_failures)) in seeds.into_iter().zip(failures).enumerate() {
-            self.seed(side, current[side], side_seeds, side_failures);
+        for (key, t_s, homography) in new_priors {
+            self.priors
+                .entry(key)
+                .and_modify(|p| {
+                    p.t_s = t_s;
+                    p.homography = homography;
+                })
+                .or_insert_with(|| Prior::new(t_s, homography));
         }
         // Forget keyframes the rings have evicted.
         let rings = &self.rings;

@@ -1,21 +1,18 @@
-//! Eq. (24)–(28) for one past image: F_Ln and F_Rn, each from ORB matches (guided by
-//! the last ground homography, else brute force) or from the correspondences
-//! frame-to-frame tracking followed, and the intersection of the two epipolar lines.
+//! Eq. (24)–(28) for one past image on the per-pair path: F_Ln and F_Rn, each from
+//! the correspondences frame-to-frame tracking followed (or, with tracking off, from
+//! ORB matches: `fresh_fit.rs`), and the intersection of the two epipolar lines.
 
-use super::anchors::{Guide, SeedPairs};
+use super::anchors::Guide;
+use super::fresh_fit::{fit_side, FitSide};
 use super::{micros, FrameMeta, PastMatch, Step};
 use crate::config::MatchingConfig;
 use crate::epipolar::{
-    estimate_fundamental, estimate_fundamental_masked, match_points, match_points_guided,
-    transfer_point, ImageBounds, MatchReject, PairGeometry,
+    estimate_fundamental, transfer_point, ImageBounds, MatchReject, PairGeometry,
 };
 use crate::features::Features;
-use crate::ground_plane::PlaneModel;
 use crate::ring::Keyframe;
 use crate::ChainTiming;
 use nalgebra::{Matrix3, Vector3};
-use opencv::core as cv;
-use opencv::prelude::*;
 use shared_types::clock::monotonic_ns;
 use shared_types::conventions::{camera_to_world, Uav};
 use std::sync::Arc;
@@ -30,8 +27,6 @@ pub(super) struct PastResult {
     pub(super) result: Result<PastMatch, MatchReject>,
     /// Ground homographies fitted on this frame.
     pub(super) homographies: [Option<Matrix3<f64>>; 2],
-    /// Of sides matched by ORB: ground inliers to track (current, past points).
-    pub(super) seeds: [SeedPairs; 2],
     pub(super) timing: ChainTiming,
     pub(super) steps: Vec<Step>,
     /// Sides matched again with `retry_ratio_test`.
@@ -56,18 +51,11 @@ pub(super) fn match_past(
     let mut out = PastResult {
         result: Err(MatchReject::FundamentalFailed),
         homographies: [None, None],
-        seeds: [Vec::new(), Vec::new()],
         timing: ChainTiming::default(),
         steps: Vec::new(),
         retried: [false, false],
     };
-    let step = |name: &'static str, start_ns: u64| Step {
-        name,
-        uav: uav.index() as u8,
-        keyframe: kf.seq,
-        start_ns,
-        end_ns: monotonic_ns(),
-    };
+    let step = |name: &'static str, start_ns: u64| Step::since(name, uav, kf.seq, start_ns);
     let mut geometry: [Option<PairGeometry>; 2] = [None, None];
     let mut guided = [false, false];
     let mut chained = [false, false];
@@ -77,15 +65,16 @@ pub(super) fn match_past(
         let up = camera_to_world(current[side].pose.attitude()).transpose() * Vector3::z();
         let intrinsics = (&current[side].intrinsics, &kf.intrinsics);
         let Some(features) = &features[side] else {
-            // No features: `match_current` made sure this side has tracked
-            // correspondences, fitted like matches.
+            // No features (tracking on): the tracked correspondences, fitted like
+            // matches.
             let t = Instant::now();
             let t_ns = monotonic_ns();
             let result = match (&guides[side].tracked, guides[side].failed) {
                 (Some((a, b)), _) => estimate_fundamental(a, b, intrinsics, &up, config),
-                // Failed on this side's last ORB frame: not retried until the next.
+                // Failed on this side's last refresh: not retried until the next.
                 (None, Some(reason)) => Err(reason),
-                (None, None) => Err(MatchReject::FundamentalFailed),
+                // Nothing tracked to this past image yet: answered without it.
+                (None, None) => Err(MatchReject::AwaitingRefresh),
             };
             out.timing.fundamental_us += micros(t);
             out.steps.push(step("F", t_ns));
@@ -103,66 +92,23 @@ pub(super) fn match_past(
                 }
             }
         };
-        let mut fit = |guide: Option<&Matrix3<f64>>,
-                       ratio: f32,
-                       timing: &mut ChainTiming,
-                       steps: &mut Vec<Step>| {
-            let t = Instant::now();
-            let t_ns = monotonic_ns();
-            let (a, b) = match guide {
-                Some(h) => match_points_guided(
-                    features,
-                    &kf.features,
-                    h,
-                    config.guided_radius_px as f32,
-                    ratio,
-                    neighbours,
-                ),
-                None => match_points(features, &kf.features, ratio, neighbours),
-            };
-            timing.matching_us += micros(t);
-            steps.push(step("match", t_ns));
-            let t = Instant::now();
-            let t_ns = monotonic_ns();
-            let mut mask = cv::Mat::default();
-            let result = estimate_fundamental_masked(&a, &b, intrinsics, &up, config, &mut mask);
-            timing.fundamental_us += micros(t);
-            steps.push(step("F", t_ns));
-            let seeds = match &result {
-                Ok(g) if config.track_between_orb && g.model == Some(PlaneModel::GroundPlane) => {
-                    ground_seeds(&a, &b, &mask, config.track_points_per_image)
-                }
-                _ => Vec::new(),
-            };
-            (result, seeds)
-        };
-        let mut result = (Err(MatchReject::FundamentalFailed), Vec::new());
-        if let Some(h) = &guides[side].prior {
-            result = fit(Some(h), config.ratio_test, &mut out.timing, &mut out.steps);
-            guided[side] = result.0.is_ok();
-        }
-        if result.0.is_err() {
-            result = fit(None, config.ratio_test, &mut out.timing, &mut out.steps);
-        }
-        // Too little support under the strict ratio: a scene with repeated texture
-        // (windows, lane marks) loses its good matches to the ratio test. Once more,
-        // looser; the robust fit and `min_inliers` still judge the result.
-        let starved = matches!(
-            result.0,
-            Err(MatchReject::TooFewMatches { .. } | MatchReject::TooFewInliers { .. })
+        let fit = fit_side(
+            config,
+            FitSide {
+                uav,
+                kf,
+                features,
+                prior: guides[side].prior.as_ref(),
+                intrinsics,
+                up: &up,
+            },
+            neighbours,
+            &mut out.timing,
+            &mut out.steps,
         );
-        if starved && config.retry_ratio_test > config.ratio_test {
-            result = fit(
-                None,
-                config.retry_ratio_test,
-                &mut out.timing,
-                &mut out.steps,
-            );
-            out.retried[side] = true;
-        }
-        let (result, seeds) = result;
-        out.seeds[side] = seeds;
-        match result {
+        guided[side] = fit.guided;
+        out.retried[side] = fit.retried;
+        match fit.result {
             Ok(g) => {
                 out.homographies[side] = g.homography;
                 geometry[side] = Some(g);
@@ -208,23 +154,4 @@ pub(super) fn match_past(
         chained,
     });
     out
-}
-
-/// Up to `most` ground inliers of a fit (a stride through them, so they stay spread),
-/// as (current, past) points: what the tracker follows until the next ORB frame.
-fn ground_seeds(
-    current: &cv::Vector<cv::Point2f>,
-    past: &cv::Vector<cv::Point2f>,
-    mask: &cv::Mat,
-    most: usize,
-) -> SeedPairs {
-    let inliers: Vec<usize> = (0..current.len())
-        .filter(|&i| mask.at::<u8>(i as i32).is_ok_and(|m| *m != 0))
-        .collect();
-    let stride = inliers.len().div_ceil(most.max(1)).max(1);
-    inliers
-        .iter()
-        .step_by(stride)
-        .filter_map(|&i| Some((current.get(i).ok()?, past.get(i).ok()?)))
-        .collect()
 }
