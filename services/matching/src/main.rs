@@ -25,8 +25,9 @@
 //! the one it landed on. Counters: `frames`, `pairs`, `sets`,
 //! `frames_lost` (sequence gaps), `frames_dropped`, `no_detection`, `warming_up`,
 //! `past_rejected.<reason>` (`awaiting_refresh`: nothing tracked to that past image
-//! yet), `refreshes`, `refresh_not_followed`, `refresh_failed`, `essential_fallback` (past images whose F came from the
-//! 5-point E because the dominant plane was not level), and the adaptations of
+//! yet), `refreshes`, `refresh_not_followed`, `refresh_failed`, `essential_fallback`
+//! (past images whose F came from the 5-point E because the dominant plane was not
+//! level), and the adaptations of
 //! [`matching::ChainCounts`]: `retried_looser_ratio`, `retry_rescued`,
 //! `fast_threshold_lowered`, `keypoints_outside_lens`, `detections_outside_lens`;
 //! `keyframes_restored`, `checkpoint_refused`, `checkpoint_failed`; `bad_frames`,
