@@ -20,9 +20,11 @@
 //!   never be located. It is the only case where a pair waits live.
 //! - **One refresh in flight per UAV**; a frame that wants one while it runs waits
 //!   for the next frame after it lands (the bound of the queue: two jobs).
-//! - **The thread runs below the per-pair path**: normal scheduling at nice 5 while
-//!   the stages run SCHED_FIFO (`[realtime]`), so it takes only the CPU the
-//!   critical path leaves.
+//! - **Live, the thread runs below the per-pair path**: normal scheduling at nice 15
+//!   while the stages run SCHED_FIFO (`[realtime]`), so it takes only the CPU the
+//!   critical path leaves (and yields to the live simulator's renderer, the stand-in
+//!   for a camera). In a replay at `--rate max` it keeps matching's priority: pairs
+//!   wait for it there, and at nice 5 it was starved (45 against 56 estimates/s).
 //! - **Same answers on any thread**: OpenCV's RNG is seeded per fit from the frame
 //!   and the keyframe, and each UAV has its own ORB extractor, used in frame order.
 
@@ -251,7 +253,12 @@ impl Refresher {
         let handle = std::thread::Builder::new()
             .name("refresh".into())
             .spawn(move || {
-                below_the_critical_path();
+                // A replay at `--rate max` waits for its refreshes at fixed frames:
+                // there the thread keeps matching's priority (it is on the path of
+                // throughput); live it goes below everything.
+                if !fixed {
+                    below_the_critical_path();
+                }
                 for job in job_rx {
                     if result_tx.send(worker.run(job)).is_err() {
                         break;
@@ -455,15 +462,17 @@ impl Drop for Refresher {
     }
 }
 
-/// Puts the calling thread on normal scheduling at nice 5: below every stage's
-/// real-time priority, and below a normal thread of the stages when `[realtime]` is
-/// off. A refusal is harmless (the thread then runs as it was started).
+/// Puts the calling thread on normal scheduling at nice 15: below every stage's
+/// real-time priority, below a normal thread of the stages when `[realtime]` is off,
+/// and below the live simulator's renderer (nice 10), which stands in for a camera
+/// that costs a ground station nothing. A refusal is harmless (the thread then runs
+/// as it was started).
 fn below_the_critical_path() {
     // SAFETY: plain system calls on the calling thread with valid arguments.
     unsafe {
         let param = libc::sched_param { sched_priority: 0 };
         let _ = libc::sched_setscheduler(0, libc::SCHED_OTHER, &param);
         let tid = libc::syscall(libc::SYS_gettid) as libc::id_t;
-        let _ = libc::setpriority(libc::PRIO_PROCESS, tid, 5);
+        let _ = libc::setpriority(libc::PRIO_PROCESS, tid, 15);
     }
 }
