@@ -52,14 +52,23 @@ fn step_index(process: &str, name: &str) -> Option<usize> {
     })
 }
 
-/// Every estimate's budget in a Chrome trace written by `dualgeo run --trace`.
-pub fn read(path: &Path) -> Result<Vec<PairBudget>> {
+/// The events of a Chrome trace written by `dualgeo run --trace`.
+fn trace_events(path: &Path) -> Result<Vec<Value>> {
     let doc: Value = serde_json::from_slice(
         &std::fs::read(path).with_context(|| format!("read {}", path.display()))?,
     )?;
-    let events = doc["traceEvents"]
-        .as_array()
-        .context("no traceEvents in the trace")?;
+    match doc {
+        Value::Object(mut m) => match m.remove("traceEvents") {
+            Some(Value::Array(events)) => Ok(events),
+            _ => anyhow::bail!("no traceEvents in {}", path.display()),
+        },
+        _ => anyhow::bail!("{} is not a trace", path.display()),
+    }
+}
+
+/// Every estimate's budget in a Chrome trace written by `dualgeo run --trace`.
+pub fn read(path: &Path) -> Result<Vec<PairBudget>> {
+    let events = &trace_events(path)?;
     let mut names: HashMap<u64, String> = HashMap::new();
     for e in events.iter().filter(|e| e["name"] == "process_name") {
         if let (Some(pid), Some(n)) = (e["pid"].as_u64(), e["args"]["name"].as_str()) {
@@ -125,12 +134,7 @@ pub fn read(path: &Path) -> Result<Vec<PairBudget>> {
 /// The durations (µs) of matching's refresh thread's jobs in a trace (its own lane,
 /// off every estimate's path: `matching::chain::refresh`).
 pub fn refreshes(path: &Path) -> Result<Vec<f64>> {
-    let doc: Value = serde_json::from_slice(
-        &std::fs::read(path).with_context(|| format!("read {}", path.display()))?,
-    )?;
-    let events = doc["traceEvents"]
-        .as_array()
-        .context("no traceEvents in the trace")?;
+    let events = trace_events(path)?;
     let matching = events
         .iter()
         .find(|e| e["name"] == "process_name" && e["args"]["name"] == "matching")

@@ -6,13 +6,14 @@
 //! No navigation noise (the Table 1 protocol): the difference is the lens alone.
 //! Truth is read by the test only.
 
+#[path = "support/render.rs"]
+mod render;
+
 use acquisition::sim::{Presets, Simulator};
-use detection::{ColourBlobConfig, ColourBlobDetector, Detector};
+use detection::{ColourBlobConfig, ColourBlobDetector};
 use geolocation::{EstimatorConfig, EstimatorMethod, NoiseModel};
-use matching::{ChainOutcome, FrameInput, MatchingConfig, VisionChain};
+use matching::{ChainOutcome, MatchingConfig, VisionChain};
 use nalgebra::Point3;
-use opencv::core as cv;
-use opencv::prelude::*;
 use shared_types::lens::Distortion;
 
 /// Located pairs, pairs tried, and the median 3-D error of the paper's filtered
@@ -22,7 +23,6 @@ fn run(preset: &str, tell_the_lens: bool) -> (usize, usize, f64) {
     config.duration_s = 14.0;
     config.noise = shared_types::nav_noise::NavNoise::NONE;
     config.bias = shared_types::nav_noise::BiasModel::NONE;
-    let (w, h) = (config.camera.width as i32, config.camera.height as i32);
     let mut sim = Simulator::new(config).unwrap();
     let lens = if tell_the_lens {
         sim.distortion()
@@ -37,10 +37,7 @@ fn run(preset: &str, tell_the_lens: bool) -> (usize, usize, f64) {
         ..EstimatorConfig::default()
     };
     let mut chain = VisionChain::new(MatchingConfig::default(), estimator).unwrap();
-    let mut images = [
-        cv::Mat::new_rows_cols_with_default(h, w, cv::CV_8UC3, cv::Scalar::all(0.0)).unwrap(),
-        cv::Mat::new_rows_cols_with_default(h, w, cv::CV_8UC3, cv::Scalar::all(0.0)).unwrap(),
-    ];
+    let mut images = render::blank_pair(&sim);
     let (mut tried, mut errors) = (0, Vec::new());
     let mut k = 0u64;
     while let Some(step) = sim.step() {
@@ -48,31 +45,7 @@ fn run(preset: &str, tell_the_lens: bool) -> (usize, usize, f64) {
         if !k.is_multiple_of(3) {
             continue;
         }
-        {
-            let [l, r] = &mut images;
-            sim.render_pair(
-                &step,
-                l.data_bytes_mut().unwrap(),
-                r.data_bytes_mut().unwrap(),
-                3 * w as usize,
-            );
-        }
-        let inputs: Vec<FrameInput> = step
-            .frames
-            .iter()
-            .zip(&images)
-            .map(|(frame, image)| FrameInput {
-                seq: frame.seq,
-                t_s: frame.t_s,
-                pose: frame.true_pose,
-                image,
-                detection: detector.detect(image).unwrap().map(|d| d.centre),
-                intrinsics: sim.intrinsics(),
-                distortion: lens,
-                width: w as u32,
-                height: h as u32,
-            })
-            .collect();
+        let inputs = render::inputs(&mut sim, &step, &mut images, &mut detector, true, lens);
         let result = chain.process(&inputs[0], &inputs[1]).unwrap();
         if step.frames[0].t_s < 6.0 {
             continue;

@@ -1,13 +1,14 @@
 //! The chain on rendered frames of the `table1` scenario (no navigation noise).
 //! Truth is read by the test only.
 
+#[path = "support/render.rs"]
+mod render;
+
 use acquisition::sim::{Presets, SimFrame, Simulator};
-use detection::{ColourBlobConfig, ColourBlobDetector, Detector};
+use detection::{ColourBlobConfig, ColourBlobDetector};
 use geolocation::EstimatorConfig;
-use matching::{ChainOutcome, FrameInput, MatchingConfig, VisionChain};
+use matching::{ChainOutcome, MatchingConfig, VisionChain};
 use nalgebra::Point3;
-use opencv::core as cv;
-use opencv::prelude::*;
 use std::collections::HashMap;
 
 /// What one run of the chain over the first 16 s of `table1` gave.
@@ -37,16 +38,12 @@ impl Transfer {
 /// The chain with `matching` on every `every`-th pair of the first 16 s of `table1`.
 fn run(matching: MatchingConfig, every: u64) -> Transfer {
     let config = Presets::builtin().get("table1").unwrap();
-    let (w, h) = (config.camera.width as i32, config.camera.height as i32);
     let mut sim = Simulator::new(config.clone()).unwrap();
     let mut detector = ColourBlobDetector::new(ColourBlobConfig::default()).unwrap();
     let mut chain = VisionChain::new(matching, EstimatorConfig::default()).unwrap();
     let mut chained = 0;
     let mut brute_force = 0;
-    let mut images = [
-        cv::Mat::new_rows_cols_with_default(h, w, cv::CV_8UC3, cv::Scalar::all(0.0)).unwrap(),
-        cv::Mat::new_rows_cols_with_default(h, w, cv::CV_8UC3, cv::Scalar::all(0.0)).unwrap(),
-    ];
+    let mut images = render::blank_pair(&sim);
     let mut history: HashMap<(usize, u64), SimFrame> = HashMap::new();
     let (mut errors, mut located, mut position_errors, mut true_f_errors) =
         (Vec::new(), 0, Vec::new(), Vec::new());
@@ -56,30 +53,11 @@ fn run(matching: MatchingConfig, every: u64) -> Transfer {
         if !k.is_multiple_of(every) || k > 480 {
             continue;
         }
-        {
-            let [l, r] = &mut images;
-            sim.render_pair(
-                &step,
-                l.data_bytes_mut().unwrap(),
-                r.data_bytes_mut().unwrap(),
-                3 * w as usize,
-            );
-        }
-        let mut inputs = Vec::new();
-        for (frame, image) in step.frames.iter().zip(&images) {
+        for frame in &step.frames {
             history.insert((frame.uav.index(), frame.seq), *frame);
-            inputs.push(FrameInput {
-                seq: frame.seq,
-                t_s: frame.t_s,
-                pose: frame.measured,
-                image,
-                detection: detector.detect(image).unwrap().map(|d| d.centre),
-                intrinsics: sim.intrinsics(),
-                distortion: sim.distortion(),
-                width: w as u32,
-                height: h as u32,
-            });
         }
+        let lens = sim.distortion();
+        let inputs = render::inputs(&mut sim, &step, &mut images, &mut detector, false, lens);
         let result = chain.process(&inputs[0], &inputs[1]).unwrap();
         if let ChainOutcome::Located(located_target) = result.outcome {
             let matching::Located { past, filtered, .. } = *located_target;

@@ -5,12 +5,13 @@
 //! `--rate max`): every pair's past points must be bit-identical, refreshes must land
 //! exactly `refresh_landing_frames` after their frame, and pairs must be located.
 
+#[path = "support/render.rs"]
+mod render;
+
 use acquisition::sim::{Presets, Simulator};
-use detection::{ColourBlobConfig, ColourBlobDetector, Detector};
+use detection::{ColourBlobConfig, ColourBlobDetector};
 use geolocation::EstimatorConfig;
-use matching::{ChainOutcome, FrameInput, MatchingConfig, VisionChain};
-use opencv::core as cv;
-use opencv::prelude::*;
+use matching::{ChainOutcome, MatchingConfig, VisionChain};
 
 /// Per pair: the past points (UAV, keyframe seq, pixel bits), or `None` if the pair
 /// was not located; and the landings (UAV, frame taken on, frame landed on).
@@ -19,7 +20,6 @@ type Answers = (Vec<Option<Vec<(u8, u64, [u64; 2])>>>, Vec<(u8, u64, u64)>);
 fn run(on_thread: bool, pairs: u64) -> Answers {
     let mut config = Presets::builtin().get("default").unwrap();
     config.duration_s = pairs as f64 / 30.0 + 0.5;
-    let (w, h) = (config.camera.width as i32, config.camera.height as i32);
     let mut sim = Simulator::new(config).unwrap();
     let mut detector = ColourBlobDetector::new(ColourBlobConfig::default()).unwrap();
     let mut chain =
@@ -27,38 +27,12 @@ fn run(on_thread: bool, pairs: u64) -> Answers {
     if on_thread {
         chain.refresh_on_thread(true).expect("refresh thread");
     }
-    let mut images = [
-        cv::Mat::new_rows_cols_with_default(h, w, cv::CV_8UC3, cv::Scalar::all(0.0)).unwrap(),
-        cv::Mat::new_rows_cols_with_default(h, w, cv::CV_8UC3, cv::Scalar::all(0.0)).unwrap(),
-    ];
+    let mut images = render::blank_pair(&sim);
     let (mut answers, mut landings) = (Vec::new(), Vec::new());
     for _ in 0..pairs {
         let Some(step) = sim.step() else { break };
-        {
-            let [l, r] = &mut images;
-            sim.render_pair(
-                &step,
-                l.data_bytes_mut().unwrap(),
-                r.data_bytes_mut().unwrap(),
-                3 * w as usize,
-            );
-        }
-        let inputs: Vec<FrameInput> = step
-            .frames
-            .iter()
-            .zip(&images)
-            .map(|(frame, image)| FrameInput {
-                seq: frame.seq,
-                t_s: frame.t_s,
-                pose: frame.measured,
-                image,
-                detection: detector.detect(image).unwrap().map(|d| d.centre),
-                intrinsics: sim.intrinsics(),
-                distortion: sim.distortion(),
-                width: w as u32,
-                height: h as u32,
-            })
-            .collect();
+        let lens = sim.distortion();
+        let inputs = render::inputs(&mut sim, &step, &mut images, &mut detector, false, lens);
         let result = chain.process(&inputs[0], &inputs[1]).expect("chain");
         answers.push(match result.outcome {
             ChainOutcome::Located(l) => Some(
