@@ -7,7 +7,7 @@
 
 use super::anchors::{KeyframeId, Prior};
 use super::refresh::{Landing, Moment, RefreshResult};
-use super::{ChainTiming, FrameMeta, Step, VisionChain};
+use super::{FrameMeta, Step, VisionChain};
 use crate::epipolar::MatchReject;
 use crate::frame::{ChainError, FrameInput};
 use crate::frame_tracking::{Motion, Observed, TrackReport};
@@ -28,9 +28,6 @@ pub struct LandingReport {
     /// How long the pair waited for it (µs): 0 live; at `--rate max`, a refresh still
     /// running on its landing frame.
     pub waited_us: u64,
-    /// The tracker took its points (else the old epoch goes on).
-    pub handed_over: bool,
-    pub timing: ChainTiming,
     /// The thread's timed steps (`orb`, `match`, `F`, and `refresh` for the whole job).
     pub steps: Vec<Step>,
 }
@@ -142,7 +139,7 @@ impl VisionChain {
         };
         self.counts.refreshes += 1;
         self.counts += r.counts;
-        let (timing, steps) = (r.timing, r.steps.clone());
+        let steps = r.steps.clone();
         let had_seeds = r.fits.iter().any(|f| !f.seeds.is_empty());
         let motion = self.land_result(r)?;
         if had_seeds && motion.is_none() {
@@ -158,8 +155,6 @@ impl VisionChain {
             submitted_ns,
             finished_ns,
             waited_us,
-            handed_over: motion.is_some(),
-            timing,
             steps,
         });
         Ok(motion)

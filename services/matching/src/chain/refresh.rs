@@ -78,7 +78,6 @@ pub struct RefreshResult {
     pub(super) fits: Vec<PastFit>,
     pub(super) admit: Option<Point3<f64>>,
     pub(super) counts: ChainCounts,
-    pub(super) timing: ChainTiming,
     /// Timed steps (`orb`, `match`, `F`) and the whole job (`refresh`), for the trace.
     pub(super) steps: Vec<Step>,
 }
@@ -123,12 +122,11 @@ impl RefreshWorker {
 
     fn refresh(&mut self, job: RefreshJob) -> Result<RefreshResult, ChainError> {
         let start_ns = monotonic_ns();
+        // The times go to the trace as steps; fit_side also sums them here.
         let mut timing = ChainTiming::default();
         let mut steps = Vec::new();
-        let t = Instant::now();
         let input = FrameInput::from_meta(&job.frame, &job.grey);
         let (features, mut counts) = extract_undistorted(&mut self.orbs[job.uav.index()], &input)?;
-        timing.orb_us = super::micros(t);
         steps.push(Step::since("orb", job.uav, job.frame.seq, start_ns));
         let features = Arc::new(features);
         let up = camera_to_world(job.frame.pose.attitude()).transpose() * Vector3::z();
@@ -179,7 +177,6 @@ impl RefreshWorker {
             fits,
             admit: job.admit,
             counts,
-            timing,
             steps,
         })
     }
