@@ -6,6 +6,7 @@
 pub mod checkpoint;
 pub mod clock;
 pub mod conventions;
+pub mod deadline;
 pub mod lens;
 pub mod messages;
 pub mod nav_noise;

@@ -14,7 +14,9 @@
 //! prediction and none inside: a look-alike not taken for the target; the service
 //! subscribes to the estimates for it, `detection::prediction_gate`), `reacquired`
 //! (detections after a camera found nothing in its gates for `reacquire_after_s`),
-//! `gated_frames` (frames detected with a gate).
+//! `gated_frames` (frames detected with a gate), `frames_late` (started after the
+//! frame's deadline, one frame period after its moment: `shared_types::deadline`) and
+//! `frames_shed` (late with a newer frame of the same UAV waiting: skipped, no message).
 
 use anyhow::{Context, Result};
 use clap::Parser;
@@ -24,14 +26,16 @@ use detection::{ColourBlobConfig, TrackedDetector};
 use shared_types::clock::{elapsed_us, monotonic_ns};
 use shared_types::conventions::Intrinsics;
 use shared_types::conventions::Uav;
+use shared_types::deadline::{drain_with_lookahead, Deadlines, Verdict};
 use shared_types::lens::Distortion;
+use shared_types::messages::FrameHeader;
 use shared_types::messages::{DetectionMsg, EstimateMsg};
 use shared_types::service_names::Topic;
 use shared_types::shell::{
     apply_realtime, init_tracing, load_section, serve, SeqGaps, ServiceArgs, StatsSaver,
 };
 use shared_types::stats::StageStats;
-use shared_types::transport::{Endpoint, Stage};
+use shared_types::transport::{Endpoint, MsgPublisher, Stage};
 
 #[derive(Parser)]
 #[command(about = "dualgeo detection service (started by `dualgeo run`)")]
@@ -46,7 +50,7 @@ fn main() -> Result<()> {
     apply_realtime(args.service.config.as_deref(), "detection")?;
     let config: ColourBlobConfig = load_section(args.service.config.as_deref(), "detection")?;
     let gate_config = config.gate;
-    let mut detector = TrackedDetector::new(config).context("detector configuration")?;
+    let detector = TrackedDetector::new(config).context("detector configuration")?;
     let endpoint = Endpoint::new(&args.service.run_id, "detection")?;
     let frames = [
         endpoint.frame_subscriber(Uav::Left)?,
@@ -54,13 +58,18 @@ fn main() -> Result<()> {
     ];
     let publisher = endpoint.publisher::<DetectionMsg>(Topic::Detections)?;
     let estimates = endpoint.subscriber::<EstimateMsg>(Topic::Estimates)?;
-    let mut predictions = RecentPredictions::default();
     let wake_matching = endpoint.notifier(Stage::Matching)?;
     let listener = endpoint.listener(Stage::Detection)?;
-    let mut stats = StageStats::new("detection");
+    let mut stage = Detecting {
+        detector,
+        predictions: RecentPredictions::default(),
+        gate_config,
+        stats: StageStats::new("detection"),
+        trace: args.service.tracer("detection"),
+        deadlines: Deadlines::new(args.service.flow_controlled),
+    };
     let mut gaps = [SeqGaps::default(); 2];
     let mut saver = StatsSaver::new(&args.service);
-    let mut trace = args.service.tracer("detection");
     tracing::info!(
         run = endpoint.run_id(),
         incarnation = args.service.incarnation,
@@ -70,88 +79,140 @@ fn main() -> Result<()> {
     let stop = serve(&listener, |wake| -> Result<bool> {
         let mut first = true;
         while let Some(e) = estimates.receive().context("receive estimate")? {
-            predictions.push(e.pair_seq, TargetPrediction::from_estimate(e.payload()));
+            stage
+                .predictions
+                .push(e.pair_seq, TargetPrediction::from_estimate(e.payload()));
         }
         for (uav, subscriber) in frames.iter().enumerate() {
-            while let Some(sample) = subscriber.receive().context("receive frame")? {
-                let header = *sample.user_header();
-                if first {
-                    if let Some(us) = wake.hop_us(header.published_ns) {
-                        stats.record("transport", us);
-                    }
-                    first = false;
-                }
-                let start = monotonic_ns();
-                stats.record("wait", elapsed_us(header.published_ns, start));
-                stats.count("frames", 1);
-                stats.count("frames_lost", gaps[uav].see(header.seq));
-                let found = match frame_mat(&header, sample.payload()) {
-                    Ok(mat) => match detector.detect_gated(
-                        uav,
-                        header.t_s,
-                        &mat,
-                        gate_of(&predictions, &header, &gate_config, &mut stats),
-                    ) {
-                        Ok(d) => d,
-                        Err(e) => {
-                            tracing::warn!(seq = header.seq, uav, "detector failed: {e}");
-                            stats.count("bad_frames", 1);
-                            None
+            // A late frame with a newer one behind it is shed (shared_types::deadline).
+            // At most two samples are borrowed at once (FRAME_MAX_BORROWED).
+            drain_with_lookahead(
+                || subscriber.receive().context("receive frame"),
+                |sample, superseded| {
+                    let header = sample.user_header();
+                    if first {
+                        if let Some(us) = wake.hop_us(header.published_ns) {
+                            stage.stats.record("transport", us);
                         }
-                    },
-                    Err(e) => {
-                        tracing::warn!(seq = header.seq, uav, "frame rejected: {e}");
-                        stats.count("bad_frames", 1);
-                        None
+                        first = false;
                     }
-                };
-                drop(sample);
-                let mut msg = DetectionMsg {
-                    seq: header.seq,
-                    capture_ns: header.capture_ns,
-                    t_s: header.t_s,
-                    uav: header.uav,
-                    ..Default::default()
-                };
-                let counts = detector.take_counts();
-                stats.count("exposure_retries", counts.exposure_retries);
-                stats.count("partial_view_dropped", counts.partial_view_dropped);
-                stats.count("window_looks", counts.window_looks);
-                stats.count("window_misses", counts.window_misses);
-                stats.count("gated_out", counts.gated_out);
-                stats.count("reacquired", counts.reacquired);
-                if let Some(d) = found {
-                    stats.count("found", 1);
-                    msg.found = 1;
-                    msg.bbox = d.bbox;
-                    msg.centre = d.centre;
-                    msg.confidence = d.confidence as f64;
-                }
-                let done = monotonic_ns();
-                stats.record("compute", elapsed_us(start, done));
-                let uav_id = Some(header.uav);
-                trace.span("wait", header.seq, uav_id, header.published_ns, start);
-                trace.span("detect", header.seq, uav_id, start, done);
-                msg.published_ns = monotonic_ns();
-                publisher.send_copy(msg).context("publish detection")?;
-                wake_matching.notify().context("wake matching")?;
-            }
+                    stage.stats.count("frames", 1);
+                    stage.stats.count("frames_lost", gaps[uav].see(header.seq));
+                    stage.deadlines.see(uav, header.t_s);
+                    let view = (*header, sample.payload());
+                    stage.handle(uav, view, superseded, &publisher)?;
+                    drop(sample);
+                    wake_matching.notify().context("wake matching")?;
+                    Ok(())
+                },
+            )?;
         }
-        saver.tick(&stats);
-        trace.maybe_flush();
+        saver.tick(&stage.stats);
+        stage.trace.maybe_flush();
         Ok(true)
     })?;
+    let Detecting { stats, trace, .. } = &mut stage;
     trace.flush();
-    let path = saver.finish(&stats)?;
+    let path = saver.finish(stats)?;
     tracing::info!(?stop, stats = %path.display(), "detection stopped");
     Ok(())
+}
+
+/// The service's state between wake-ups.
+struct Detecting {
+    detector: TrackedDetector,
+    predictions: RecentPredictions,
+    gate_config: detection::prediction_gate::GateConfig,
+    stats: StageStats,
+    trace: shared_types::trace::Tracer,
+    deadlines: Deadlines<2>,
+}
+
+impl Detecting {
+    /// Detects in one frame of `uav` and publishes the result, or sheds the frame
+    /// (`frames_shed`, no message) when it is past its deadline and `superseded` by a
+    /// newer frame of the same UAV; a late frame with nothing newer is detected and
+    /// counted `frames_late`.
+    fn handle(
+        &mut self,
+        uav: usize,
+        (header, payload): (FrameHeader, &[u8]),
+        superseded: bool,
+        publisher: &MsgPublisher<DetectionMsg>,
+    ) -> Result<()> {
+        let start = monotonic_ns();
+        let uav_id = Some(header.uav);
+        self.stats
+            .record("wait", elapsed_us(header.published_ns, start));
+        self.trace
+            .span("wait", header.seq, uav_id, header.published_ns, start);
+        match self
+            .deadlines
+            .verdict(uav, header.capture_ns, start, superseded)
+        {
+            Verdict::Shed => {
+                self.stats.count("frames_shed", 1);
+                return Ok(());
+            }
+            Verdict::Late => self.stats.count("frames_late", 1),
+            Verdict::OnTime => {}
+        }
+        let stats = &mut self.stats;
+        let found = match frame_mat(&header, payload) {
+            Ok(mat) => match self.detector.detect_gated(
+                uav,
+                header.t_s,
+                &mat,
+                gate_of(&self.predictions, &header, &self.gate_config, stats),
+            ) {
+                Ok(d) => d,
+                Err(e) => {
+                    tracing::warn!(seq = header.seq, uav, "detector failed: {e}");
+                    stats.count("bad_frames", 1);
+                    None
+                }
+            },
+            Err(e) => {
+                tracing::warn!(seq = header.seq, uav, "frame rejected: {e}");
+                stats.count("bad_frames", 1);
+                None
+            }
+        };
+        let mut msg = DetectionMsg {
+            seq: header.seq,
+            capture_ns: header.capture_ns,
+            t_s: header.t_s,
+            uav: header.uav,
+            ..Default::default()
+        };
+        let counts = self.detector.take_counts();
+        stats.count("exposure_retries", counts.exposure_retries);
+        stats.count("partial_view_dropped", counts.partial_view_dropped);
+        stats.count("window_looks", counts.window_looks);
+        stats.count("window_misses", counts.window_misses);
+        stats.count("gated_out", counts.gated_out);
+        stats.count("reacquired", counts.reacquired);
+        if let Some(d) = found {
+            stats.count("found", 1);
+            msg.found = 1;
+            msg.bbox = d.bbox;
+            msg.centre = d.centre;
+            msg.confidence = d.confidence as f64;
+        }
+        let done = monotonic_ns();
+        stats.record("compute", elapsed_us(start, done));
+        self.trace.span("detect", header.seq, uav_id, start, done);
+        msg.published_ns = monotonic_ns();
+        publisher.send_copy(msg).context("publish detection")?;
+        Ok(())
+    }
 }
 
 /// The gate of this frame from the estimate [`detection::prediction_gate::ESTIMATE_LAG_PAIRS`]
 /// pairs back, if the filter was tracking then (counted `gated_frames`).
 fn gate_of(
     predictions: &RecentPredictions,
-    header: &shared_types::messages::FrameHeader,
+    header: &FrameHeader,
     config: &detection::prediction_gate::GateConfig,
     stats: &mut StageStats,
 ) -> Option<detection::prediction_gate::Gate> {

@@ -14,7 +14,8 @@
 //! Histograms (µs): `transport`, `wait`, `compute`, `checkpoint` (write of the state
 //! file), and `end_to_end` (frame capture → estimate published). Counters: `sets`,
 //! `estimates`, `sets_lost`, `bad_input`, `rejected.<reason>`, `resumed`,
-//! `checkpoint_refused`, `checkpoint_failed`, `stale_sets`.
+//! `checkpoint_refused`, `checkpoint_failed`, `stale_sets`, `estimates_late` (published
+//! more than a frame period after the pair's moment; `shared_types::deadline`).
 
 use anyhow::{Context, Result};
 use clap::Parser;
@@ -22,6 +23,7 @@ use geolocation::set_message::{estimate_message, is_stale, Resume, CHECKPOINT_KI
 use geolocation::{EstimatorConfig, EstimatorMethod, TemporalEstimator};
 use shared_types::checkpoint;
 use shared_types::clock::{elapsed_us, monotonic_ns};
+use shared_types::deadline::{Deadlines, Verdict};
 use shared_types::messages::{EstimateMsg, ObservationSetMsg};
 use shared_types::service_names::Topic;
 use shared_types::shell::{
@@ -83,6 +85,10 @@ fn main() -> Result<()> {
     let listener = endpoint.listener(Stage::Geolocation)?;
     let mut stats = StageStats::new("geolocation");
     let mut gaps = SeqGaps::default();
+    // Every set is estimated, late or not: the filter's update is well under a
+    // millisecond and a skipped set's information would be lost for every later
+    // estimate. Late ones are counted (`estimates_late`).
+    let mut deadlines = Deadlines::<1>::new(args.service.flow_controlled);
     let mut temporal = match config.method {
         EstimatorMethod::Temporal => Some(TemporalEstimator::new(config)?),
         _ => None,
@@ -118,6 +124,10 @@ fn main() -> Result<()> {
             stats.record("compute", elapsed_us(start, done));
             msg.published_ns = monotonic_ns();
             stats.record("end_to_end", elapsed_us(msg.capture_ns, msg.published_ns));
+            deadlines.see(0, msg.t_s);
+            if deadlines.verdict(0, msg.capture_ns, msg.published_ns, false) == Verdict::Late {
+                stats.count("estimates_late", 1);
+            }
             trace.span("wait", set_pair, None, set_published, start);
             trace.span("estimate", set_pair, None, start, done);
             trace.span(

@@ -19,6 +19,7 @@ use detection::frame_view::frame_mat;
 use geolocation::EstimatorConfig;
 use shared_types::clock::{elapsed_us, monotonic_ns};
 use shared_types::conventions::{Intrinsics, Uav};
+use shared_types::deadline::{Deadlines, Verdict};
 use shared_types::lens::Distortion;
 use shared_types::messages::{DetectionMsg, FrameHeader, ObservationSetMsg, MAX_OBSERVATIONS};
 use shared_types::stats::StageStats;
@@ -50,6 +51,9 @@ pub struct Intake {
     /// Where the rings are checkpointed, and what was admitted since the last save.
     store: Option<RingStore>,
     unsaved: [bool; 2],
+    /// The pairs' deadlines (off until the shell turns them on: the evaluation and
+    /// `--rate max` have no clock to be late against).
+    pub deadlines: Deadlines<1>,
 }
 
 /// One frame observed (tracked, and ORB where wanted), with its counts.
@@ -110,6 +114,7 @@ impl Intake {
             trace: Tracer::off(),
             store: None,
             unsaved: [false; 2],
+            deadlines: Deadlines::new(true),
         })
     }
 
@@ -309,6 +314,13 @@ impl Intake {
         self.stats.count("pairs", 1);
         self.acks += 1;
         let start = monotonic_ns();
+        // Only the newest complete pair is ever matched (older ones were abandoned
+        // above), so a late pair has nothing newer to yield to: matched, counted.
+        self.deadlines.see(0, hl.t_s);
+        let moment = hl.capture_ns.min(hr.capture_ns);
+        if self.deadlines.verdict(0, moment, start, false) == Verdict::Late {
+            self.stats.count("pairs_late", 1);
+        }
         let (ml, mr) = (meta(&hl, &dl), meta(&hr, &dr));
         let mut observed = [ol, or];
         let mut timing = ChainTiming::default();

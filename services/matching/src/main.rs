@@ -11,7 +11,10 @@
 //!   the tracked points, and an [`ObservationSetMsg`] to geolocation.
 //!
 //! A slow matching stage keeps only the newest pair: older queued frames are dropped
-//! and counted (`frames_dropped`).
+//! and counted (`frames_dropped`), on time or not (the tracker steps over a skipped
+//! frame; tracking the older one would only delay the newer). A pair matched more than
+//! a frame period after its moment is counted `pairs_late` (`shared_types::deadline`;
+//! none with `--flow-controlled`).
 //!
 //! Restart (issue #13): with `--state-dir`, every admitted keyframe and the rings' index
 //! are checkpointed ([`matching::ring_store`]) after the pair's set is published; a
@@ -42,6 +45,7 @@ use matching::intake::Intake;
 use matching::MatchingConfig;
 use shared_types::clock::{elapsed_us, monotonic_ns};
 use shared_types::conventions::Uav;
+use shared_types::deadline::Deadlines;
 use shared_types::messages::{DetectionMsg, ObservationSetMsg};
 use shared_types::service_names::Topic;
 use shared_types::shell::{
@@ -107,6 +111,7 @@ fn main() -> Result<()> {
     let estimator: EstimatorConfig = load_section(path, "estimator")?;
     let mut intake = Intake::new(config.clone(), estimator)?;
     intake.trace = args.service.tracer("matching");
+    intake.deadlines = Deadlines::new(args.service.flow_controlled);
     if let Some(dir) = &args.service.state_dir {
         intake.restore(dir, config, estimator)?;
     }

@@ -29,12 +29,14 @@ pub const ROWS: [&str; 6] = [
 /// Frames that entered the pipeline (or were due to) and never reached a geolocation
 /// attempt: pairs acquisition could not loan or skipped because it fell more than a
 /// frame behind the clock (×2), frames overwritten before detection
-/// or matching read them, frames matching skipped to stay current, and observation sets
+/// or matching read them, frames detection shed (late with a newer one waiting),
+/// frames matching skipped to stay current, and observation sets
 /// geolocation missed (×2). `counter(stage, name)` reads the counters.
 pub fn frames_dropped_of(counter: impl Fn(&str, &str) -> u64) -> u64 {
     2 * counter("acquisition", "pairs_dropped")
         + 2 * counter("acquisition", "pairs_behind")
         + counter("detection", "frames_lost")
+        + counter("detection", "frames_shed")
         + counter("matching", "frames_lost")
         + counter("matching", "frames_dropped")
         + 2 * counter("geolocation", "sets_lost")
