@@ -3,6 +3,7 @@
 //! What every dualgeo process agrees on: the frame conventions (one function builds
 //! C_w^c), the shared-memory message layouts and the service names.
 
+pub mod alloc_count;
 pub mod checkpoint;
 pub mod clock;
 pub mod conventions;

@@ -56,16 +56,27 @@ impl StageStats {
     }
 
     /// Records `us` microseconds under `name`.
+    /// Records `us` microseconds under `name` (allocates only for a new name).
     pub fn record(&mut self, name: &str, us: u64) {
-        let h = self
-            .histograms
-            .entry(name.to_string())
-            .or_insert_with(new_histogram);
-        h.saturating_record(us.clamp(1, MAX_US));
+        let us = us.clamp(1, MAX_US);
+        match self.histograms.get_mut(name) {
+            Some(h) => h.saturating_record(us),
+            None => {
+                let mut h = new_histogram();
+                h.saturating_record(us);
+                self.histograms.insert(name.to_string(), h);
+            }
+        }
     }
 
+    /// Adds `n` to the counter `name` (allocates only for a new name).
     pub fn count(&mut self, name: &str, n: u64) {
-        *self.counters.entry(name.to_string()).or_default() += n;
+        match self.counters.get_mut(name) {
+            Some(c) => *c += n,
+            None => {
+                self.counters.insert(name.to_string(), n);
+            }
+        }
     }
 
     pub fn counter(&self, name: &str) -> u64 {
