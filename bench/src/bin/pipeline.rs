@@ -8,6 +8,10 @@
 //! 4. the same scenario recorded as JPEG (quality 95) replayed at its own rate: the
 //!    decode cost PNG and JPEG recordings put on the end-to-end clock.
 //!
+//! 5. a soak: the JPEG recording looped at its own rate for `--soak-s` (10 minutes by
+//!    default), run once after the others, with per-minute p99 and memory from its
+//!    soak.csv (`dualgeo run --loop --sample-every-s 60`).
+//!
 //! `--realtime FILE` runs every row a second time with `--config FILE` (a `[realtime]`
 //! section: CPU affinity, SCHED_FIFO, locked memory), interleaved with the plain one and
 //! labelled with the file's name: e.g. `no-priorities.toml` with `mode = "off"`
@@ -53,6 +57,86 @@ struct Args {
     /// with the file's name.
     #[arg(long, value_name = "FILE")]
     realtime: Option<PathBuf>,
+    /// Seconds of the soak row (the JPEG recording looped at its own rate, sampled
+    /// every minute, run once after the other rows); 0 leaves it out.
+    #[arg(long, default_value_t = 600.0)]
+    soak_s: f64,
+}
+
+/// The soak row's warm-up and sampling interval (`dualgeo run --soak-warm-up-s`,
+/// `--sample-every-s`): per-minute figures after the first minute.
+const SOAK_INTERVAL_S: f64 = 60.0;
+
+/// The soak row's figures from its report.json and soak.csv: frames dropped, the
+/// whole run's end-to-end p99, the largest departure of a minute's p99 from the first
+/// minute's after the warm-up, and the largest departure of a process's memory from
+/// its first sample after the warm-up (in %).
+fn soak_figures(label: &str, out: &Path) -> Result<Vec<Figure>> {
+    let r = report(out)?;
+    let text = std::fs::read_to_string(out.join("soak.csv"))?;
+    let mut lines = text.lines();
+    let header: Vec<&str> = lines
+        .next()
+        .context("soak.csv is empty")?
+        .split(',')
+        .collect();
+    let col = |name: &str| header.iter().position(|h| *h == name);
+    let p99_col = col("p99_us_geolocation_end_to_end").context("soak.csv: no p99 column")?;
+    let rss_cols: Vec<usize> = (0..header.len())
+        .filter(|&i| header[i].starts_with("rss_kib_"))
+        .collect();
+    let rows: Vec<Vec<f64>> = lines
+        .map(|l| {
+            l.split(',')
+                .map(|v| v.parse().unwrap_or(f64::NAN))
+                .collect()
+        })
+        .filter(|row: &Vec<f64>| row[0] > SOAK_INTERVAL_S + 1e-6)
+        .collect();
+    let drift = |values: Vec<f64>| -> f64 {
+        let values: Vec<f64> = values.into_iter().filter(|v| *v > 0.0).collect();
+        let Some(first) = values.first().copied() else {
+            return f64::NAN;
+        };
+        values
+            .iter()
+            .map(|v| 100.0 * (v - first) / first)
+            .fold(0.0, |w: f64, d| if d.abs() > w.abs() { d } else { w })
+    };
+    let p99_drift = drift(rows.iter().map(|r| r[p99_col]).collect());
+    let rss_drift = rss_cols
+        .iter()
+        .map(|&c| drift(rows.iter().map(|r| r[c]).collect()))
+        .fold(0.0, |w: f64, d| if d.abs() > w.abs() { d } else { w });
+    Ok(vec![
+        (
+            format!("{label}: frames dropped"),
+            "0".into(),
+            r["frames_dropped"].as_f64().unwrap_or(f64::NAN),
+            true,
+        ),
+        (
+            format!("{label}: end-to-end p99 ms"),
+            "–".into(),
+            r["latency_us"]["end_to_end"]["p99"]
+                .as_f64()
+                .unwrap_or(f64::NAN)
+                / 1e3,
+            true,
+        ),
+        (
+            format!("{label}: per-minute p99, largest drift from the first %"),
+            "within ±20".into(),
+            p99_drift,
+            true,
+        ),
+        (
+            format!("{label}: memory, largest drift of a process %"),
+            "within ±1".into(),
+            rss_drift,
+            true,
+        ),
+    ])
 }
 
 const ROOT: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/..");
@@ -211,6 +295,29 @@ fn main() -> Result<()> {
             per_row[i].push(figures(label, &report(Path::new(&out))?, *with_cpu));
         }
     }
+    // The soak row: once (it is long), after the others.
+    let mut soak: Vec<Figure> = Vec::new();
+    if args.soak_s > 0.0 {
+        let label = format!("soak {:.0} min, JPEG replay looped", args.soak_s / 60.0);
+        eprintln!("[soak] {label}");
+        let out = s("soak");
+        let (run_for, every) = (args.soak_s.to_string(), SOAK_INTERVAL_S.to_string());
+        run(&[
+            "run",
+            "--source",
+            &rec_jpeg,
+            "--loop",
+            "--run-for-s",
+            &run_for,
+            "--sample-every-s",
+            &every,
+            "--soak-warm-up-s",
+            &every,
+            "--out",
+            &out,
+        ])?;
+        soak = soak_figures(&label, Path::new(&out))?;
+    }
     // (name, target, median, lower is better) and the repeats' range.
     let mut now: Vec<Figure> = Vec::new();
     let mut ranges: BTreeMap<String, (f64, f64)> = BTreeMap::new();
@@ -222,6 +329,10 @@ fn main() -> Result<()> {
             let median = budget::percentile(&sorted, 0.5);
             now.push((name.clone(), target.clone(), median, *lower));
         }
+    }
+    for (name, target, value, lower) in soak {
+        ranges.insert(name.clone(), (value, value));
+        now.push((name, target, value, lower));
     }
 
     let before: BTreeMap<String, f64> = std::fs::read_to_string(BASELINE)
@@ -272,8 +383,8 @@ fn main() -> Result<()> {
     let mut docs = format!(
         "Measured by `cargo run --release -p dualgeo-bench --bin pipeline -- --duration-s {d}{with}` \
          (640×480, 8 images, the default estimator and priorities, this 2-core machine; each \
-         row run {n} times, interleaved: the median and the range). \"committed\" is \
-         bench/baselines/pipeline.json.\n\n{table}",
+         row run {n} times, interleaved: the median and the range; the soak row once, its \
+         minutes after the first). \"committed\" is bench/baselines/pipeline.json.\n\n{table}",
         n = args.repeats
     );
     for b in budgets {
