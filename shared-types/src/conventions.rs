@@ -106,6 +106,56 @@ pub fn nadir_camera_to_body() -> Matrix3<f64> {
     Matrix3::new(0.0, -1.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0)
 }
 
+/// `C_G^c` (recording format v2): camera (OpenCV) vectors to the gimbal frame G. The
+/// camera looks along G's +x; image right is G's +y, image down G's +z.
+pub fn camera_to_gimbal() -> Matrix3<f64> {
+    Matrix3::new(0.0, 0.0, 1.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0)
+}
+
+/// A camera's orientation on its UAV (recording format v2): the gimbal frame G
+/// relative to the body FRD frame, as aerospace Z-Y-X angles in **radians** (MAVLink's
+/// GIMBAL_DEVICE_ATTITUDE_STATUS in vehicle frame). A nadir camera is G = (0, −π/2, 0).
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+pub struct Mount(pub Attitude);
+
+impl Mount {
+    /// Straight down, image top toward the nose: version 1's only mount.
+    pub const NADIR: Mount = Mount(Attitude {
+        yaw: 0.0,
+        pitch: -std::f64::consts::FRAC_PI_2,
+        roll: 0.0,
+    });
+
+    pub fn from_degrees(yaw_deg: f64, pitch_deg: f64, roll_deg: f64) -> Self {
+        Self(Attitude::from_degrees(yaw_deg, pitch_deg, roll_deg))
+    }
+
+    /// `C_b^c = C_b^G · C_G^c`: camera vectors to body (FRD).
+    pub fn camera_to_body(self) -> Matrix3<f64> {
+        body_to_ned(self.0) * camera_to_gimbal()
+    }
+
+    /// The attitude a body with a *nadir* camera would need for its camera to point as
+    /// this mount's camera does on a body at `body`: the one attitude with
+    /// `camera_to_world(equivalent) = C_enu^ned · C_n^b(body) · C_b^c(mount)`.
+    ///
+    /// Every estimator, matcher and gate of dualgeo is written for a nadir camera's
+    /// `camera_to_world(attitude)`; a tilted or gimballed camera enters them as this
+    /// equivalent attitude, converted once where the pose is read. The yaw bias carries
+    /// over exactly: it is a rotation about the world vertical applied on the left
+    /// (`Rz(ψ + b) = Rz(b) · Rz(ψ)`), so the equivalent yaw has the body's bias. The
+    /// AHRS's pitch and roll errors, about the body's axes, spread over all three
+    /// equivalent angles (for a camera tilted off nadir, some of them into the yaw).
+    /// Singular only for an optical axis along the horizon (equivalent pitch ±90°), a
+    /// view that cannot geolocate a ground target.
+    pub fn equivalent_nadir_attitude(self, body: Attitude) -> Attitude {
+        let nadir_inverse = nadir_camera_to_body().transpose();
+        let r = body_to_ned(body) * self.camera_to_body() * nadir_inverse;
+        let (roll, pitch, yaw) = Rotation3::from_matrix_unchecked(r).euler_angles();
+        Attitude { yaw, pitch, roll }
+    }
+}
+
 /// `C_w^c` of eq. (1): rotation taking camera-frame vectors to the world (ENU) frame for
 /// a nadir camera on a body with attitude `att`.
 ///
@@ -252,6 +302,57 @@ mod tests {
             }};
         }
         pub(crate) use assert_close;
+    }
+
+    #[test]
+    fn the_nadir_mount_is_version_ones_camera() {
+        assert_close!(Mount::NADIR.camera_to_body(), nadir_camera_to_body(), 1e-15);
+        let body = Attitude::from_degrees(37.0, 4.0, -3.0);
+        let eq = Mount::NADIR.equivalent_nadir_attitude(body);
+        assert_close!(camera_to_world(eq), camera_to_world(body), 1e-12);
+        assert!((eq.yaw - body.yaw).abs() < 1e-12 && (eq.pitch - body.pitch).abs() < 1e-12);
+    }
+
+    #[test]
+    fn a_camera_pitched_forward_looks_ahead_of_the_uav() {
+        // Level, nose north, camera 30° forward of straight down.
+        let mount = Mount::from_degrees(0.0, -60.0, 0.0);
+        let eq = mount.equivalent_nadir_attitude(Attitude::default());
+        let axis = camera_to_world(eq) * Vector3::z();
+        assert_close!(axis, Vector3::new(0.0, 0.5, -(3f64.sqrt() / 2.0)), 1e-12);
+        // Image right stays east.
+        assert_close!(camera_to_world(eq) * Vector3::x(), Vector3::x(), 1e-12);
+    }
+
+    proptest! {
+        #[test]
+        fn the_equivalent_attitude_gives_the_mounted_cameras_rotation(
+            yaw in -180.0f64..180.0, pitch in -20.0f64..20.0, roll in -20.0f64..20.0,
+            gy in -180.0f64..180.0, gp in -85.0f64..-20.0, gr in -10.0f64..10.0,
+        ) {
+            let body = Attitude::from_degrees(yaw, pitch, roll);
+            let mount = Mount::from_degrees(gy, gp, gr);
+            let eq = mount.equivalent_nadir_attitude(body);
+            let textbook = ned_to_enu() * body_to_ned(body) * mount.camera_to_body();
+            prop_assert!((camera_to_world(eq) - textbook).norm() < 1e-9);
+        }
+
+        #[test]
+        fn a_yaw_bias_carries_over_to_the_equivalent_yaw(
+            yaw in -180.0f64..180.0, pitch in -20.0f64..20.0, roll in -20.0f64..20.0,
+            gy in -180.0f64..180.0, gp in -85.0f64..-20.0, gr in -10.0f64..10.0,
+            bias in -30.0f64..30.0,
+        ) {
+            let body = Attitude::from_degrees(yaw, pitch, roll);
+            let biased = Attitude::from_degrees(yaw + bias, pitch, roll);
+            let mount = Mount::from_degrees(gy, gp, gr);
+            let (a, b) = (
+                mount.equivalent_nadir_attitude(body),
+                mount.equivalent_nadir_attitude(biased),
+            );
+            prop_assert!((wrap_angle(b.yaw - a.yaw) - bias.to_radians()).abs() < 1e-9);
+            prop_assert!((b.pitch - a.pitch).abs() < 1e-9 && (b.roll - a.roll).abs() < 1e-9);
+        }
     }
 
     #[test]

@@ -486,6 +486,7 @@ fn main() -> Result<()> {
                     file: "live".into(),
                     t_s: info.t_s + t_offset,
                     pose: info.poses[uav],
+                    gimbal: None,
                 };
                 let truth = TruthRow {
                     frame: seq,

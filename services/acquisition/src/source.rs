@@ -229,6 +229,7 @@ impl FrameSource for SimSource {
             pose: f.true_pose,
             target: f.target,
             target_px: f.target_px,
+            gimbal: None,
         });
         Some(Ok(PairInfo {
             t_s: step.frames[0].t_s,
@@ -333,10 +334,9 @@ impl FrameSource for RecordingSource {
             r?;
             Ok(PairInfo {
                 t_s: rec.telemetry[pair.left].t_s,
-                poses: [
-                    rec.telemetry[pair.left].pose,
-                    rec.telemetry[pair.right].pose,
-                ],
+                // The cameras' poses: for a tilted or gimballed camera, the body's
+                // attitude turned into the equivalent nadir one (recording format v2).
+                poses: [rec.camera_pose(pair.left), rec.camera_pose(pair.right)],
                 truth: None,
                 captured_ns: None,
             })

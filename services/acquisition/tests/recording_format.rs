@@ -1,4 +1,4 @@
-//! Recording format v1: round trip, and one test per kind of bad input, each checking
+//! Recording format v1 (v2's tilted and gimballed cameras: recording_format_v2.rs): round trip, and one test per kind of bad input, each checking
 //! that the error names the file (and for CSV the line and column).
 
 use acquisition::recording::{
@@ -75,6 +75,7 @@ fn write_valid() -> (TempDir, PathBuf) {
                 } else {
                     Some([31.25, 20.0 / 3.0])
                 },
+                gimbal: None,
             };
             w.write_frame(
                 uav,
@@ -141,6 +142,7 @@ fn round_trip_is_identical() {
             pose: t.pose,
             target: t.target,
             target_px: t.target_px,
+            gimbal: None,
         };
         w.write_frame(
             row.uav,
@@ -327,10 +329,10 @@ fn bad_metadata_version_and_unknown_key() {
     let (_d, root) = write_valid();
     let p = root.join("recording.toml");
     let text = std::fs::read_to_string(&p).unwrap();
-    std::fs::write(&p, text.replace("version = 1", "version = 2")).unwrap();
+    std::fs::write(&p, text.replace("version = 1", "version = 3")).unwrap();
     let e = open_err(&root);
     assert!(
-        e.contains("recording.toml") && e.contains("unsupported version 2"),
+        e.contains("recording.toml") && e.contains("unsupported version 3"),
         "{e}"
     );
     std::fs::write(

@@ -183,10 +183,11 @@ impl FlightWriter {
             file: format!("{}#{frame}", self.meta.uav(uav).video),
             t_s,
             pose: measured,
+            gimbal: None,
         };
         let path = self.dir.join("telemetry.csv");
         self.telemetry
-            .write_record(telemetry_record(&row))
+            .write_record(telemetry_record(&row, false))
             .map_err(|e| io(&path, e))?;
         let truth = TruthRow {
             frame,
@@ -194,7 +195,7 @@ impl FlightWriter {
         };
         let path = self.dir.join("truth.csv");
         self.truth
-            .write_record(truth_record(&truth))
+            .write_record(truth_record(&truth, false))
             .map_err(|e| io(&path, e))
     }
 

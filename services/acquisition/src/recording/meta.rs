@@ -2,11 +2,12 @@
 
 use super::RecordingError;
 use serde::{Deserialize, Serialize};
-use shared_types::conventions::{Intrinsics, Uav};
+use shared_types::conventions::{Intrinsics, Mount, Uav};
 use std::path::Path;
 
 pub const FORMAT_NAME: &str = "dual-uav-recording";
-pub const FORMAT_VERSION: u32 = 1;
+/// The newest version this reader knows; it reads every version from 1.
+pub const FORMAT_VERSION: u32 = 2;
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -42,9 +43,34 @@ pub struct UavPair {
 pub struct UavMeta {
     /// Folder of this UAV's images, relative to the recording.
     pub frames: String,
-    /// Only "nadir" in version 1.
+    /// "nadir" (the only mount of version 1); version 2 adds "fixed" (with
+    /// `mount_angles`) and "gimbal" (angles per image in telemetry.csv).
     pub mount: String,
+    /// The fixed mount's gimbal frame relative to the body (degrees): only with
+    /// `mount = "fixed"`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub mount_angles: Option<MountAngles>,
     pub camera: CameraMeta,
+}
+
+/// `[uav.NAME.mount_angles]`: aerospace Z-Y-X angles of the gimbal frame relative to
+/// the body, degrees (nadir is pitch −90).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct MountAngles {
+    pub yaw_deg: f64,
+    pub pitch_deg: f64,
+    pub roll_deg: f64,
+}
+
+/// How a UAV's camera is mounted (recording format v2).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum CameraMount {
+    Nadir,
+    /// Constant angles.
+    Fixed(Mount),
+    /// Angles per image (telemetry.csv's gimbal columns).
+    Gimbal,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -72,11 +98,12 @@ impl RecordingMeta {
         let uav = |frames: &str| UavMeta {
             frames: frames.into(),
             mount: "nadir".into(),
+            mount_angles: None,
             camera,
         };
         Self {
             format: FORMAT_NAME.into(),
-            version: FORMAT_VERSION,
+            version: 1,
             name: name.into(),
             frame_rate_hz,
             origin,
@@ -92,6 +119,49 @@ impl RecordingMeta {
             Uav::Left => &self.uav.left,
             Uav::Right => &self.uav.right,
         }
+    }
+
+    pub fn uav_mut(&mut self, uav: Uav) -> &mut UavMeta {
+        match uav {
+            Uav::Left => &mut self.uav.left,
+            Uav::Right => &mut self.uav.right,
+        }
+    }
+
+    /// Gives `uav` a fixed tilted camera (`mount = "fixed"`, version 2).
+    pub fn set_fixed_mount(&mut self, uav: Uav, angles: MountAngles) {
+        let m = self.uav_mut(uav);
+        (m.mount, m.mount_angles) = ("fixed".into(), Some(angles));
+        self.version = 2;
+    }
+
+    /// Gives `uav` a gimballed camera (`mount = "gimbal"`, version 2): its angles go
+    /// with each image ([`crate::recording::RecordingWriter::write_gimbal_frame`]).
+    pub fn set_gimbal_mount(&mut self, uav: Uav) {
+        let m = self.uav_mut(uav);
+        (m.mount, m.mount_angles) = ("gimbal".into(), None);
+        self.version = 2;
+    }
+
+    /// `uav`'s camera mount (the metadata is validated: an unknown mount reads nadir
+    /// only on an unvalidated value).
+    pub fn mount(&self, uav: Uav) -> CameraMount {
+        let m = self.uav(uav);
+        match (m.mount.as_str(), m.mount_angles) {
+            ("fixed", Some(a)) => {
+                CameraMount::Fixed(Mount::from_degrees(a.yaw_deg, a.pitch_deg, a.roll_deg))
+            }
+            ("gimbal", _) => CameraMount::Gimbal,
+            _ => CameraMount::Nadir,
+        }
+    }
+
+    /// Whether telemetry.csv (and truth.csv) carry the gimbal columns: exactly when a
+    /// UAV has `mount = "gimbal"`.
+    pub fn has_gimbal_columns(&self) -> bool {
+        [Uav::Left, Uav::Right]
+            .iter()
+            .any(|u| self.mount(*u) == CameraMount::Gimbal)
     }
 
     pub fn read(path: &Path) -> Result<Self, RecordingError> {
@@ -120,7 +190,7 @@ impl RecordingMeta {
         toml::to_string(self).expect("RecordingMeta always serialises")
     }
 
-    /// Checks every rule of format v1 that the TOML types alone do not.
+    /// Checks every rule of formats v1 and v2 that the TOML types alone do not.
     pub fn validate(&self) -> Result<(), String> {
         if self.format != FORMAT_NAME {
             return Err(format!(
@@ -128,9 +198,9 @@ impl RecordingMeta {
                 self.format
             ));
         }
-        if self.version != FORMAT_VERSION {
+        if !(1..=FORMAT_VERSION).contains(&self.version) {
             return Err(format!(
-                "unsupported version {} (this reader knows {FORMAT_VERSION})",
+                "unsupported version {} (this reader knows 1 to {FORMAT_VERSION})",
                 self.version
             ));
         }
@@ -156,11 +226,38 @@ impl RecordingMeta {
         for uav in [Uav::Left, Uav::Right] {
             let m = self.uav(uav);
             let name = uav.name();
-            if m.mount != "nadir" {
-                return Err(format!(
-                    "uav.{name}.mount must be \"nadir\" in version 1, got \"{}\"",
-                    m.mount
-                ));
+            match (self.version, m.mount.as_str(), m.mount_angles) {
+                (_, "nadir", None) => {}
+                (1, other, _) if other != "nadir" => {
+                    return Err(format!(
+                        "uav.{name}.mount must be \"nadir\" in version 1, got \"{other}\" (tilted and gimballed cameras need version = 2)"
+                    ))
+                }
+                (_, "fixed", Some(a)) => {
+                    let finite = [a.yaw_deg, a.pitch_deg, a.roll_deg]
+                        .iter()
+                        .all(|v| v.is_finite());
+                    if !finite {
+                        return Err(format!("uav.{name}.mount_angles must be finite"));
+                    }
+                }
+                (_, "fixed", None) => {
+                    return Err(format!(
+                        "uav.{name}.mount = \"fixed\" needs [uav.{name}.mount_angles] with yaw_deg, pitch_deg, roll_deg"
+                    ))
+                }
+                (_, "gimbal", None) => {}
+                (_, "nadir" | "gimbal", Some(_)) => {
+                    return Err(format!(
+                        "uav.{name}.mount_angles is only for mount = \"fixed\" (\"{}\" takes none)",
+                        m.mount
+                    ))
+                }
+                (_, other, _) => {
+                    return Err(format!(
+                        "uav.{name}.mount must be \"nadir\", \"fixed\" or \"gimbal\", got \"{other}\""
+                    ))
+                }
             }
             let folder = Path::new(&m.frames);
             if m.frames.is_empty()

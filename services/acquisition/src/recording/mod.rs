@@ -13,8 +13,11 @@ mod writer;
 pub use error::{CsvPlace, RecordingError};
 pub use image_file::{decode_bytes_into, decode_image, decode_image_into};
 pub use image_header::declared_size;
-pub use meta::{CameraMeta, Origin, RecordingMeta, UavMeta, UavPair, FORMAT_NAME, FORMAT_VERSION};
-pub use reader::{Recording, StereoPair};
+pub use meta::{
+    CameraMeta, CameraMount, MountAngles, Origin, RecordingMeta, UavMeta, UavPair, FORMAT_NAME,
+    FORMAT_VERSION,
+};
+pub use reader::{camera_pose, Recording, StereoPair};
 pub use rows::{
     parse_telemetry, parse_truth, read_telemetry, read_truth, TelemetryRow, TruthRow,
     TELEMETRY_HEADER, TRUTH_HEADER,

@@ -3,10 +3,12 @@
 
 use super::error::CsvPlace;
 use super::image_file::decode_image;
+use super::meta::CameraMount;
 use super::rows::{read_telemetry, read_truth, TelemetryRow, TruthRow};
 use super::{RecordingError, RecordingMeta, META_FILE, TELEMETRY_FILE, TRUTH_FILE};
 use opencv::core as cv;
-use shared_types::conventions::Uav;
+use shared_types::conventions::{Mount, Uav};
+use shared_types::messages::PoseSample;
 use std::collections::{BTreeSet, HashMap};
 use std::path::{Component, Path, PathBuf};
 
@@ -54,6 +56,7 @@ impl Recording {
             });
         }
         check_image_files(&root, &meta, &telemetry_path, &rows)?;
+        check_gimbal_angles(&meta, &telemetry_path, &rows)?;
         check_no_extra_top_level(&root, &meta)?;
         let truth_path = root.join(TRUTH_FILE);
         let truth = if truth_path.exists() {
@@ -67,6 +70,15 @@ impl Recording {
             telemetry: rows.into_iter().map(|(_, r)| r).collect(),
             truth,
         })
+    }
+
+    /// The camera's measured pose at telemetry row `index`: the body's position, and
+    /// its attitude turned into the equivalent nadir camera's for a tilted or
+    /// gimballed camera (`Mount::equivalent_nadir_attitude`; the yaw bias carries over).
+    /// The row's own pose for a nadir camera.
+    pub fn camera_pose(&self, index: usize) -> PoseSample {
+        let row = &self.telemetry[index];
+        camera_pose(&self.meta, row.uav, row.pose, row.gimbal)
     }
 
     /// Decodes the image of telemetry row `index` (8-bit grey or BGR).
@@ -107,6 +119,30 @@ impl Recording {
     }
 }
 
+/// A camera's pose from its body's `pose` and, for a gimbal, the gimbal's angles
+/// (degrees) of the same image.
+pub fn camera_pose(
+    meta: &RecordingMeta,
+    uav: Uav,
+    pose: PoseSample,
+    gimbal: Option<[f64; 3]>,
+) -> PoseSample {
+    let mount = match (meta.mount(uav), gimbal) {
+        (CameraMount::Nadir, _) => return pose,
+        (CameraMount::Fixed(m), _) => m,
+        (CameraMount::Gimbal, Some([y, p, r])) => Mount::from_degrees(y, p, r),
+        // Refused by `Recording::open`: a gimbal row without angles.
+        (CameraMount::Gimbal, None) => Mount::NADIR,
+    };
+    let a = mount.equivalent_nadir_attitude(pose.attitude());
+    PoseSample {
+        yaw_deg: a.yaw.to_degrees(),
+        pitch_deg: a.pitch.to_degrees(),
+        roll_deg: a.roll.to_degrees(),
+        ..pose
+    }
+}
+
 fn csv_error(
     path: &Path,
     line: u64,
@@ -123,6 +159,38 @@ fn csv_error(
         },
         message,
     }
+}
+
+/// Version 2: a UAV with `mount = "gimbal"` has its angles on every row, any other
+/// UAV none (a file whose gimbal columns are all empty is read as one without them).
+fn check_gimbal_angles(
+    meta: &RecordingMeta,
+    path: &Path,
+    rows: &[(u64, TelemetryRow)],
+) -> Result<(), RecordingError> {
+    for (line, row) in rows {
+        let gimbal = meta.mount(row.uav) == CameraMount::Gimbal;
+        if gimbal != row.gimbal.is_some() {
+            return Err(csv_error(
+                path,
+                *line,
+                11,
+                "gimbal_yaw_deg",
+                if gimbal {
+                    format!(
+                        "{} has mount = \"gimbal\": its gimbal angles are empty",
+                        row.uav.name()
+                    )
+                } else {
+                    format!(
+                        "{} has no gimbal: its gimbal angles must be empty",
+                        row.uav.name()
+                    )
+                },
+            ));
+        }
+    }
+    Ok(())
 }
 
 /// Every image path is inside its UAV's folder and exists; no folder holds other files.

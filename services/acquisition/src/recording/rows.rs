@@ -22,6 +22,42 @@ pub const TELEMETRY_HEADER: [&str; 10] = [
     "roll_deg",
 ];
 
+pub const TELEMETRY_GIMBAL_HEADER: [&str; 13] = [
+    "uav",
+    "frame",
+    "file",
+    "t_s",
+    "x_m",
+    "y_m",
+    "z_m",
+    "yaw_deg",
+    "pitch_deg",
+    "roll_deg",
+    "gimbal_yaw_deg",
+    "gimbal_pitch_deg",
+    "gimbal_roll_deg",
+];
+
+pub const TRUTH_GIMBAL_HEADER: [&str; 17] = [
+    "uav",
+    "frame",
+    "t_s",
+    "x_m",
+    "y_m",
+    "z_m",
+    "yaw_deg",
+    "pitch_deg",
+    "roll_deg",
+    "target_x_m",
+    "target_y_m",
+    "target_z_m",
+    "target_u_px",
+    "target_v_px",
+    "gimbal_yaw_deg",
+    "gimbal_pitch_deg",
+    "gimbal_roll_deg",
+];
+
 pub const TRUTH_HEADER: [&str; 14] = [
     "uav",
     "frame",
@@ -47,8 +83,11 @@ pub struct TelemetryRow {
     /// Image path relative to the recording.
     pub file: String,
     pub t_s: f64,
-    /// Measured position and attitude (ENU metres, degrees).
+    /// Measured position and attitude of the body (ENU metres, degrees).
     pub pose: PoseSample,
+    /// Version 2, `mount = "gimbal"`: the gimbal's measured angles relative to the body
+    /// (yaw, pitch, roll in degrees); `None` for other mounts.
+    pub gimbal: Option<[f64; 3]>,
 }
 
 /// One row of truth.csv: the true state of one image and the true target.
@@ -62,6 +101,8 @@ pub struct TruthRow {
     pub target: [f64; 3],
     /// Its true pixel in this image; `None` when outside the image.
     pub target_px: Option<[f64; 2]>,
+    /// The true gimbal angles (degrees), for `mount = "gimbal"`.
+    pub gimbal: Option<[f64; 3]>,
 }
 
 /// Reads one CSV row at a time with its place, for error messages.
@@ -135,6 +176,30 @@ impl Fields<'_> {
         }
     }
 
+    /// The three gimbal columns from `first`, if the file has them: all three numbers
+    /// or all three empty.
+    fn gimbal(&self, first: usize) -> Result<Option<[f64; 3]>, RecordingError> {
+        if self.header.len() < first + 3 {
+            return Ok(None);
+        }
+        let v = [
+            self.optional_number(first)?,
+            self.optional_number(first + 1)?,
+            self.optional_number(first + 2)?,
+        ];
+        match v {
+            [Some(y), Some(p), Some(r)] => Ok(Some([y, p, r])),
+            [None, None, None] => Ok(None),
+            _ => {
+                let empty = v.iter().position(Option::is_none).unwrap_or(0);
+                Err(self.error(
+                    first + empty,
+                    "the three gimbal angles must all be given or all be empty",
+                ))
+            }
+        }
+    }
+
     fn pose(&self, first: usize) -> Result<PoseSample, RecordingError> {
         Ok(PoseSample {
             x_m: self.number(first)?,
@@ -155,14 +220,15 @@ fn open_csv(path: &Path) -> Result<std::io::BufReader<std::fs::File>, RecordingE
     Ok(std::io::BufReader::new(file))
 }
 
-/// Reads CSV from `input` (errors name `path`), checks its header and hands each data
-/// row to `row` with its line.
+/// Reads CSV from `input` (errors name `path`), checks that its header is one of
+/// `headers` and hands each data row to `row` with its line.
 fn parse_csv<T>(
     input: impl Read,
     path: &Path,
-    header: &'static [&'static str],
+    headers: &[&'static [&'static str]],
     mut row: impl FnMut(&Fields) -> Result<T, RecordingError>,
 ) -> Result<Vec<T>, RecordingError> {
+    let mut header: &'static [&'static str] = headers[0];
     let mut reader = csv::ReaderBuilder::new()
         .has_headers(false)
         .flexible(true)
@@ -190,11 +256,18 @@ fn parse_csv<T>(
         let line = record.position().map_or(0, |p| p.line());
         if first {
             first = false;
-            if record.iter().ne(header.iter().copied()) {
-                return Err(whole_line(
-                    line,
-                    format!("bad or missing header: expected \"{}\"", header.join(",")),
-                ));
+            match headers.iter().find(|h| record.iter().eq(h.iter().copied())) {
+                Some(h) => header = h,
+                None => {
+                    let expected: Vec<String> = headers.iter().map(|h| h.join(",")).collect();
+                    return Err(whole_line(
+                        line,
+                        format!(
+                            "bad or missing header: expected \"{}\"",
+                            expected.join("\" or \"")
+                        ),
+                    ));
+                }
             }
             continue;
         }
@@ -280,7 +353,8 @@ pub fn parse_telemetry(
     path: &Path,
 ) -> Result<Vec<(u64, TelemetryRow)>, RecordingError> {
     let mut order = Monotonic::new();
-    parse_csv(input, path, &TELEMETRY_HEADER, |f| {
+    let headers: [&'static [&'static str]; 2] = [&TELEMETRY_HEADER, &TELEMETRY_GIMBAL_HEADER];
+    parse_csv(input, path, &headers, |f| {
         let uav = f.uav(0)?;
         let frame = f.frame(1)?;
         let file = f.text(2).to_string();
@@ -289,6 +363,7 @@ pub fn parse_telemetry(
         }
         let t_s = f.number(3)?;
         let pose = f.pose(4)?;
+        let gimbal = f.gimbal(10)?;
         order.check(f, uav, frame, t_s, 1, 3)?;
         Ok((
             f.line,
@@ -298,6 +373,7 @@ pub fn parse_telemetry(
                 file,
                 t_s,
                 pose,
+                gimbal,
             },
         ))
     })
@@ -311,7 +387,8 @@ pub fn read_truth(path: &Path) -> Result<Vec<(u64, TruthRow)>, RecordingError> {
 /// Rows of truth.csv read from `input`, errors naming `path`.
 pub fn parse_truth(input: impl Read, path: &Path) -> Result<Vec<(u64, TruthRow)>, RecordingError> {
     let mut order = Monotonic::new();
-    parse_csv(input, path, &TRUTH_HEADER, |f| {
+    let headers: [&'static [&'static str]; 2] = [&TRUTH_HEADER, &TRUTH_GIMBAL_HEADER];
+    parse_csv(input, path, &headers, |f| {
         let uav = f.uav(0)?;
         let frame = f.frame(1)?;
         let t_s = f.number(2)?;
@@ -328,6 +405,7 @@ pub fn parse_truth(input: impl Read, path: &Path) -> Result<Vec<(u64, TruthRow)>
                 return Err(f.error(12, "target_u_px is empty but target_v_px is not"))
             }
         };
+        let gimbal = f.gimbal(14)?;
         Ok((
             f.line,
             TruthRow {
@@ -337,6 +415,7 @@ pub fn parse_truth(input: impl Read, path: &Path) -> Result<Vec<(u64, TruthRow)>
                 pose,
                 target,
                 target_px,
+                gimbal,
             },
         ))
     })
@@ -346,7 +425,14 @@ fn pose_fields(p: &PoseSample) -> [String; 6] {
     [p.x_m, p.y_m, p.z_m, p.yaw_deg, p.pitch_deg, p.roll_deg].map(|v| v.to_string())
 }
 
-pub(crate) fn telemetry_record(row: &TelemetryRow) -> Vec<String> {
+/// The gimbal columns of a row of a file that has them (empty for a UAV without a
+/// gimbal).
+fn gimbal_fields(gimbal: Option<[f64; 3]>) -> [String; 3] {
+    gimbal.map_or_else(Default::default, |g| g.map(|v| v.to_string()))
+}
+
+/// A telemetry.csv record; `gimbal_columns` when the file has them.
+pub(crate) fn telemetry_record(row: &TelemetryRow, gimbal_columns: bool) -> Vec<String> {
     let mut r = vec![
         row.uav.name().to_string(),
         row.frame.to_string(),
@@ -354,10 +440,14 @@ pub(crate) fn telemetry_record(row: &TelemetryRow) -> Vec<String> {
         row.t_s.to_string(),
     ];
     r.extend(pose_fields(&row.pose));
+    if gimbal_columns {
+        r.extend(gimbal_fields(row.gimbal));
+    }
     r
 }
 
-pub(crate) fn truth_record(row: &TruthRow) -> Vec<String> {
+/// A truth.csv record; `gimbal_columns` when the file has them.
+pub(crate) fn truth_record(row: &TruthRow, gimbal_columns: bool) -> Vec<String> {
     let mut r = vec![
         row.uav.name().to_string(),
         row.frame.to_string(),
@@ -369,5 +459,17 @@ pub(crate) fn truth_record(row: &TruthRow) -> Vec<String> {
         Some([u, v]) => r.extend([u.to_string(), v.to_string()]),
         None => r.extend([String::new(), String::new()]),
     }
+    if gimbal_columns {
+        r.extend(gimbal_fields(row.gimbal));
+    }
     r
+}
+
+/// The headers of telemetry.csv and truth.csv, with or without the gimbal columns.
+pub fn headers(gimbal_columns: bool) -> (&'static [&'static str], &'static [&'static str]) {
+    if gimbal_columns {
+        (&TELEMETRY_GIMBAL_HEADER, &TRUTH_GIMBAL_HEADER)
+    } else {
+        (&TELEMETRY_HEADER, &TRUTH_HEADER)
+    }
 }

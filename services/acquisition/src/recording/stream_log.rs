@@ -78,10 +78,10 @@ impl StreamLog {
         truth: &TruthRow,
     ) -> Result<(), RecordingError> {
         self.telemetry
-            .write_record(telemetry_record(telemetry))
+            .write_record(telemetry_record(telemetry, false))
             .map_err(|e| err(&self.dir.join(TELEMETRY_FILE), e))?;
         self.truth
-            .write_record(truth_record(truth))
+            .write_record(truth_record(truth, false))
             .map_err(|e| err(&self.dir.join(TRUTH_FILE), e))
     }
 

@@ -3,10 +3,8 @@
 //! with floats in Rust's shortest round-trip form so the reader gets back exactly what
 //! was written.
 
-use super::rows::{
-    telemetry_record, truth_record, TelemetryRow, TruthRow, TELEMETRY_HEADER, TRUTH_HEADER,
-};
-use super::{RecordingError, RecordingMeta, META_FILE, TELEMETRY_FILE, TRUTH_FILE};
+use super::rows::{headers, telemetry_record, truth_record, TelemetryRow, TruthRow};
+use super::{CameraMount, RecordingError, RecordingMeta, META_FILE, TELEMETRY_FILE, TRUTH_FILE};
 use opencv::core as cv;
 use opencv::prelude::*;
 use shared_types::conventions::Uav;
@@ -20,6 +18,8 @@ pub struct TruthSample {
     pub pose: PoseSample,
     pub target: [f64; 3],
     pub target_px: Option<[f64; 2]>,
+    /// The true gimbal angles (degrees), for a UAV with `mount = "gimbal"`.
+    pub gimbal: Option<[f64; 3]>,
 }
 
 /// How a recording's images are encoded.
@@ -99,9 +99,10 @@ impl RecordingWriter {
             w.write_record(header).map_err(|e| write_err(&path, e))?;
             Ok(w)
         };
-        let telemetry = open(TELEMETRY_FILE, &TELEMETRY_HEADER)?;
+        let (telemetry_header, truth_header) = headers(meta.has_gimbal_columns());
+        let telemetry = open(TELEMETRY_FILE, telemetry_header)?;
         let truth = with_truth
-            .then(|| open(TRUTH_FILE, &TRUTH_HEADER))
+            .then(|| open(TRUTH_FILE, truth_header))
             .transpose()?;
         Ok(Self {
             root,
@@ -137,6 +138,20 @@ impl RecordingWriter {
     ) -> Result<TelemetryRow, RecordingError> {
         let png = self.encode(uav, image)?;
         self.write_encoded_frame(uav, t_s, measured, &png, truth)
+    }
+
+    /// [`RecordingWriter::write_encoded_frame`] for a UAV with `mount = "gimbal"`: with
+    /// the gimbal's measured angles (degrees; the truth's in `truth.gimbal`).
+    pub fn write_gimbal_frame(
+        &mut self,
+        uav: Uav,
+        t_s: f64,
+        measured: PoseSample,
+        gimbal: [f64; 3],
+        png: &[u8],
+        truth: Option<&TruthSample>,
+    ) -> Result<TelemetryRow, RecordingError> {
+        self.write_row(uav, t_s, measured, Some(gimbal), png, truth)
     }
 
     /// Checks `image` against `uav`'s camera and encodes it. Takes `&self`, so
@@ -177,6 +192,18 @@ impl RecordingWriter {
         png: &[u8],
         truth: Option<&TruthSample>,
     ) -> Result<TelemetryRow, RecordingError> {
+        self.write_row(uav, t_s, measured, None, png, truth)
+    }
+
+    fn write_row(
+        &mut self,
+        uav: Uav,
+        t_s: f64,
+        measured: PoseSample,
+        gimbal: Option<[f64; 3]>,
+        png: &[u8],
+        truth: Option<&TruthSample>,
+    ) -> Result<TelemetryRow, RecordingError> {
         let frame = self.next_frame[uav.index()];
         let extension = self.encoding.extension();
         let file = format!("{}/{frame:06}.{extension}", self.meta.uav(uav).frames);
@@ -199,6 +226,19 @@ impl RecordingWriter {
         {
             return Err(write_err(&path, "pose or truth is not finite"));
         }
+        let is_gimbal = self.meta.mount(uav) == CameraMount::Gimbal;
+        let truth_gimbal = truth.and_then(|t| t.gimbal);
+        let all_finite = |g: Option<[f64; 3]>| g.is_none_or(|g| g.iter().all(|v| v.is_finite()));
+        if is_gimbal != gimbal.is_some()
+            || (truth.is_some() && is_gimbal != truth_gimbal.is_some())
+            || !all_finite(gimbal)
+            || !all_finite(truth_gimbal)
+        {
+            return Err(write_err(
+                &path,
+                "gimbal angles (finite) are given exactly for a UAV with mount = \"gimbal\"",
+            ));
+        }
         if truth.is_some() != self.truth.is_some() {
             return Err(write_err(
                 &path,
@@ -213,10 +253,12 @@ impl RecordingWriter {
             file,
             t_s,
             pose: measured,
+            gimbal,
         };
+        let columns = self.meta.has_gimbal_columns();
         let telemetry_path = self.root.join(TELEMETRY_FILE);
         self.telemetry
-            .write_record(telemetry_record(&row))
+            .write_record(telemetry_record(&row, columns))
             .map_err(|e| write_err(&telemetry_path, e))?;
         if let (Some(w), Some(t)) = (self.truth.as_mut(), truth) {
             let truth_row = TruthRow {
@@ -226,8 +268,9 @@ impl RecordingWriter {
                 pose: t.pose,
                 target: t.target,
                 target_px: t.target_px,
+                gimbal: truth_gimbal,
             };
-            w.write_record(truth_record(&truth_row))
+            w.write_record(truth_record(&truth_row, columns))
                 .map_err(|e| write_err(&self.root.join(TRUTH_FILE), e))?;
         }
         self.next_frame[uav.index()] += 1;

@@ -225,6 +225,9 @@ pub struct Motion {
     heading: f64,
     history: Vec<[Vector2<f64>; 2]>, // last two UAV horizontal positions, for accelerations
     dt: f64,
+    /// Where each UAV flies relative to its nadir station, in the body's (forward,
+    /// right) metres: behind and beside it by what a tilted camera looks ahead.
+    camera_offset: Vector2<f64>,
 }
 
 const G: f64 = 9.81;
@@ -244,7 +247,19 @@ impl Motion {
             heading: h,
             history: Vec::new(),
             dt,
+            camera_offset: Vector2::zeros(),
         }
+    }
+
+    /// Flies each UAV so that a camera whose optical axis is `boresight` in the body
+    /// frame (FRD, pointing down) meets the ground where a nadir camera would: offset
+    /// by −altitude × (forward, right) / down.
+    pub fn with_camera_boresight(mut self, boresight: nalgebra::Vector3<f64>) -> Self {
+        if boresight.z > 0.0 {
+            let agl = self.flight.altitude_agl_m;
+            self.camera_offset = -agl * Vector2::new(boresight.x, boresight.y) / boresight.z;
+        }
+        self
     }
 
     /// The route the vehicle (and any traffic) drives.
@@ -260,9 +275,11 @@ impl Motion {
     }
 
     fn uav_xy(&self, uav: Uav) -> Vector2<f64> {
+        let fwd = Vector2::new(self.heading.sin(), self.heading.cos());
         let right = Vector2::new(self.heading.cos(), -self.heading.sin());
         let side = if uav == Uav::Left { -0.5 } else { 0.5 };
-        self.centre + right * (side * self.flight.separation_m)
+        let off = self.camera_offset;
+        self.centre + right * (side * self.flight.separation_m + off.y) + fwd * off.x
     }
 
     fn state(&self) -> TrueState {

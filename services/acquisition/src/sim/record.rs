@@ -1,12 +1,12 @@
-//! Rendering a scenario into a recording (format v1) or a flight (videos + tlogs), with
-//! truth.
+//! Rendering a scenario into a recording (format v1; v2 with a tilted camera) or a
+//! flight (videos + tlogs; nadir cameras only), with truth.
 
 use super::simulator::{SimStep, Simulator};
 use super::SimError;
 use crate::flight::video::VideoCodec;
 use crate::flight::writer::FlightWriter;
 use crate::recording::{
-    CameraMeta, ImageEncoding, RecordingMeta, RecordingWriter, TruthRow, TruthSample,
+    CameraMeta, ImageEncoding, MountAngles, RecordingMeta, RecordingWriter, TruthRow, TruthSample,
 };
 use opencv::core as cv;
 use opencv::prelude::*;
@@ -46,12 +46,20 @@ impl PairSink for RecordingWriter {
             (l.join().expect("encoder thread panicked"), r)
         });
         for (frame, png) in step.frames.iter().zip([png_left?, png_right?]) {
+            // The body's poses: the recording states the mount in recording.toml.
             let truth = TruthSample {
-                pose: frame.true_pose,
+                pose: frame.body_true,
                 target: frame.target,
                 target_px: frame.target_px,
+                gimbal: None,
             };
-            self.write_encoded_frame(frame.uav, frame.t_s, frame.measured, &png, Some(&truth))?;
+            self.write_encoded_frame(
+                frame.uav,
+                frame.t_s,
+                frame.body_measured,
+                &png,
+                Some(&truth),
+            )?;
         }
         Ok(())
     }
@@ -72,6 +80,7 @@ impl PairSink for FlightWriter {
                 pose: frame.true_pose,
                 target: frame.target,
                 target_px: frame.target_px,
+                gimbal: None,
             };
             self.write_frame(frame.uav, frame.t_s, image, frame.measured, &truth)
                 .map_err(SimError::Config)?;
@@ -105,7 +114,17 @@ pub fn record(
     progress: impl FnMut(u64, u64),
 ) -> Result<RecordSummary, SimError> {
     let config = sim.config().clone();
-    let meta = RecordingMeta::new(name, config.frame_rate_hz, camera_of(sim), config.origin);
+    let mut meta = RecordingMeta::new(name, config.frame_rate_hz, camera_of(sim), config.origin);
+    if let Some([yaw_deg, pitch_deg, roll_deg]) = config.camera.mount_angles_deg {
+        for uav in [Uav::Left, Uav::Right] {
+            let angles = MountAngles {
+                yaw_deg,
+                pitch_deg,
+                roll_deg,
+            };
+            meta.set_fixed_mount(uav, angles);
+        }
+    }
     let mut writer = RecordingWriter::create(out, &meta, true)?.with_encoding(encoding);
     let summary = render_into(sim, &mut writer, progress)?;
     writer.finish()?;
@@ -123,6 +142,11 @@ pub fn record_flight(
     progress: impl FnMut(u64, u64),
 ) -> Result<(RecordSummary, &'static str), SimError> {
     let config = sim.config().clone();
+    if config.camera.mount().is_some() {
+        return Err(SimError::Config(
+            "a flight (video + tlog) carries nadir cameras only; record a tilted camera as a recording (dualgeo simulate --out)".into(),
+        ));
+    }
     let origin = config.origin.ok_or_else(|| {
         SimError::Config(
             "a flight needs the scenario's geodetic origin (the preset has none)".into(),

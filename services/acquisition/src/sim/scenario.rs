@@ -7,6 +7,7 @@ use super::motion::{DrivingSpec, FlightSpec};
 use super::SimError;
 use crate::recording::Origin;
 use serde::{Deserialize, Serialize};
+use shared_types::conventions::Mount;
 use shared_types::nav_noise::{BiasModel, NavNoise};
 use std::path::PathBuf;
 
@@ -91,6 +92,20 @@ pub struct SimCamera {
     /// recording carries it as `distortion`, the live source in each frame's header.
     #[serde(default, skip_serializing_if = "is_pinhole")]
     pub distortion: [f64; 5],
+    /// A fixed tilted camera (recording format v2, `mount = "fixed"`): the gimbal
+    /// frame's yaw, pitch and roll relative to the body, degrees; none: nadir (pitch
+    /// −90). The UAVs then fly where the camera's optical axis meets the ground at the
+    /// vehicle, and recordings are written as version 2.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub mount_angles_deg: Option<[f64; 3]>,
+}
+
+impl SimCamera {
+    /// The camera's mount; none for nadir.
+    pub fn mount(&self) -> Option<Mount> {
+        self.mount_angles_deg
+            .map(|[y, p, r]| Mount::from_degrees(y, p, r))
+    }
 }
 
 fn is_pinhole(d: &[f64; 5]) -> bool {
@@ -123,6 +138,17 @@ impl SimConfig {
         let hfov_ok = c.hfov_deg > 5.0 && c.hfov_deg < 150.0;
         if !hfov_ok {
             return bad(format!("camera hfov_deg {} outside (5, 150)", c.hfov_deg));
+        }
+        if let Some(m) = c.mount() {
+            // The optical axis must be within 60° of straight down on a level body, so
+            // that the vehicle stays in view from the flight altitude.
+            let down = (m.camera_to_body() * nalgebra::Vector3::z()).z;
+            if !(down.is_finite() && down >= 0.5) {
+                return bad(format!(
+                    "camera mount_angles_deg {:?} must point the camera within 60° of straight down",
+                    c.mount_angles_deg
+                ));
+            }
         }
         if !c.distortion.iter().all(|k| k.is_finite() && k.abs() < 10.0) {
             return bad(format!(

@@ -26,9 +26,17 @@ pub struct SimFrame {
     pub t_s: f64,
     /// The true camera (used to render).
     pub view: CameraView,
+    /// The camera's true pose: its position and, for a tilted camera, the equivalent
+    /// nadir attitude (`Mount::equivalent_nadir_attitude`); what every consumer of a
+    /// frame's pose uses. The body's own for a nadir camera.
     pub true_pose: PoseSample,
-    /// GPS + AHRS: truth plus Gaussian noise, the yaw plus its bias.
+    /// GPS + AHRS: truth plus Gaussian noise, the yaw plus its bias (the camera's, as
+    /// `true_pose`).
     pub measured: PoseSample,
+    /// The body's true and measured poses, as a recording stores them (telemetry.csv
+    /// and truth.csv carry the body's attitude and the mount separately).
+    pub body_true: PoseSample,
+    pub body_measured: PoseSample,
     /// The target point (centre of the vehicle's top face), ENU.
     pub target: [f64; 3],
     /// Its exact projection, when inside the image.
@@ -84,13 +92,16 @@ impl Simulator {
         config.validate()?;
         let route = Route::new(&config.driving).map_err(SimError::Config)?;
         let dt = 1.0 / config.frame_rate_hz;
-        let motion = Motion::new(
+        let mut motion = Motion::new(
             route,
             config.flight,
             config.city.ground_z_m,
             config.driving.start_m,
             dt,
         );
+        if let Some(m) = config.camera.mount() {
+            motion = motion.with_camera_boresight(m.camera_to_body() * nalgebra::Vector3::z());
+        }
         let c = config.camera;
         let intrinsics = Intrinsics::from_hfov(c.width, c.height, c.hfov_deg);
         let lens = Distortion(c.distortion);
@@ -196,7 +207,9 @@ impl Simulator {
         let i = uav.index();
         let [x, y, z] = state.uav_position[i];
         let [yaw, pitch, roll] = state.uav_attitude[i];
-        let attitude = Attitude::new(yaw, pitch, roll);
+        let mount = self.config.camera.mount();
+        let camera = |a: Attitude| mount.map_or(a, |m| m.equivalent_nadir_attitude(a));
+        let attitude = camera(Attitude::new(yaw, pitch, roll));
         let view = CameraView {
             position: Point3::new(x, y, z),
             rotation: camera_to_world(attitude),
@@ -209,15 +222,27 @@ impl Simulator {
             rand_distr::StandardNormal.sample(rng)
         });
         let bias = self.config.bias.at(state.t_s)[i];
-        let true_pose = pose(x, y, z, yaw, pitch, roll);
-        let measured = pose(
+        let body_true = pose(x, y, z, Attitude::new(yaw, pitch, roll));
+        let body_measured = pose(
             x + noise[0],
             y + noise[1],
             z + noise[2],
-            yaw + bias + noise[3].to_radians(),
-            pitch + noise[4].to_radians(),
-            roll + noise[5].to_radians(),
+            Attitude::new(
+                yaw + bias + noise[3].to_radians(),
+                pitch + noise[4].to_radians(),
+                roll + noise[5].to_radians(),
+            ),
         );
+        let (true_pose, measured) = match mount {
+            None => (body_true, body_measured),
+            Some(_) => {
+                let at = |p: &PoseSample, a: Attitude| pose(p.x_m, p.y_m, p.z_m, camera(a));
+                (
+                    at(&body_true, Attitude::new(yaw, pitch, roll)),
+                    at(&body_measured, body_measured.attitude()),
+                )
+            }
+        };
         let (w, h) = (view.width as f64, view.height as f64);
         let lens = self.distortion();
         let target_px = view
@@ -231,6 +256,8 @@ impl Simulator {
             view,
             true_pose,
             measured,
+            body_true,
+            body_measured,
             target: [target.x, target.y, target.z],
             target_px,
         }
@@ -444,13 +471,13 @@ pub fn resolve_data_path(path: &std::path::Path) -> std::path::PathBuf {
 }
 
 /// A pose in the recording's units: metres and degrees, yaw wrapped to (−180, 180].
-fn pose(x: f64, y: f64, z: f64, yaw: f64, pitch: f64, roll: f64) -> PoseSample {
+fn pose(x: f64, y: f64, z: f64, a: Attitude) -> PoseSample {
     PoseSample {
         x_m: x,
         y_m: y,
         z_m: z,
-        yaw_deg: wrap_angle(yaw).to_degrees(),
-        pitch_deg: pitch.to_degrees(),
-        roll_deg: roll.to_degrees(),
+        yaw_deg: wrap_angle(a.yaw).to_degrees(),
+        pitch_deg: a.pitch.to_degrees(),
+        roll_deg: a.roll.to_degrees(),
     }
 }

@@ -80,6 +80,7 @@ fn recording_seeds(dir: &Path) {
                 pose,
                 target: [1.0, 2.0, 13.5],
                 target_px: (k != 1).then_some([30.0, 20.0]),
+                gimbal: None,
             };
             w.write_frame(uav, k as f64 / 30.0, pose, &frame, Some(&truth))
                 .expect("write a frame");
