@@ -247,6 +247,40 @@ fn bad_input_at_the_boundary_is_a_clear_error() {
         assert!(!o.status.success(), "{toml}");
         assert!(text(&o.stderr).contains(says), "{}", text(&o.stderr));
     }
+
+    // A recording the reader refuses (here a NaN in telemetry.csv) is refused before any
+    // process starts, naming the file, line and column: no service ran, none restarted.
+    let rec = dir.join("rec");
+    let o = dualgeo(&[
+        "simulate",
+        "--duration-s",
+        "0.2",
+        "--out",
+        rec.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    let telemetry = rec.join("telemetry.csv");
+    let csv = std::fs::read_to_string(&telemetry).unwrap();
+    let mut lines: Vec<String> = csv.lines().map(String::from).collect();
+    let mut fields: Vec<&str> = lines[3].split(',').collect();
+    fields[7] = "nan";
+    lines[3] = fields.join(",");
+    std::fs::write(&telemetry, lines.join("\n") + "\n").unwrap();
+    let out = dir.join("out-rec");
+    let o = dualgeo(&[
+        "run",
+        "--source",
+        rec.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(!o.status.success());
+    let err = text(&o.stderr);
+    assert!(
+        err.contains("telemetry.csv line 4") && err.contains("yaw_deg"),
+        "{err}"
+    );
+    assert!(!out.join("stats").exists(), "no service started");
 }
 
 /// `dualgeo run ARGS` with its output captured.

@@ -363,3 +363,19 @@ fn a_simulated_tilted_recording_reads_back_as_the_camera_that_rendered_it() {
     }
     assert!(checked >= 10, "{checked} frames with the target in view");
 }
+
+/// The format lists `truth_targets.csv` (every moving vehicle, for multi-target
+/// evaluation): a recording that has one opens (it is not read yet); another extra file
+/// is still refused.
+#[test]
+fn a_recording_with_truth_targets_opens() {
+    let (_d, root) = write(CameraMount::Nadir);
+    std::fs::write(
+        root.join("truth_targets.csv"),
+        "uav,frame,t_s,target_id,target_x_m,target_y_m,target_z_m,target_u_px,target_v_px\n",
+    )
+    .unwrap();
+    Recording::open(&root).unwrap();
+    std::fs::write(root.join("notes.txt"), "x").unwrap();
+    assert!(open_err(&root).contains("notes.txt"));
+}

@@ -28,3 +28,6 @@ pub use writer::{ImageEncoding, RecordingWriter, TruthSample};
 pub const META_FILE: &str = "recording.toml";
 pub const TELEMETRY_FILE: &str = "telemetry.csv";
 pub const TRUTH_FILE: &str = "truth.csv";
+/// Every moving vehicle's truth (optional, for multi-target evaluation): accepted as the
+/// format lists it, not read yet.
+pub const TRUTH_TARGETS_FILE: &str = "truth_targets.csv";

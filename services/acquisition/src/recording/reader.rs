@@ -5,7 +5,9 @@ use super::error::CsvPlace;
 use super::image_file::decode_image;
 use super::meta::CameraMount;
 use super::rows::{read_telemetry, read_truth, TelemetryRow, TruthRow};
-use super::{RecordingError, RecordingMeta, META_FILE, TELEMETRY_FILE, TRUTH_FILE};
+use super::{
+    RecordingError, RecordingMeta, META_FILE, TELEMETRY_FILE, TRUTH_FILE, TRUTH_TARGETS_FILE,
+};
 use opencv::core as cv;
 use shared_types::conventions::{Mount, Uav};
 use shared_types::messages::PoseSample;
@@ -274,6 +276,7 @@ fn check_no_extra_top_level(root: &Path, meta: &RecordingMeta) -> Result<(), Rec
         META_FILE,
         TELEMETRY_FILE,
         TRUTH_FILE,
+        TRUTH_TARGETS_FILE,
         &meta.uav.left.frames,
         &meta.uav.right.frames,
     ]

@@ -25,7 +25,7 @@ use super::plots;
 use super::track::{geodetic, read_back};
 use super::RunArgs;
 use acquisition::flight::FlightMeta;
-use acquisition::recording::{Origin, RecordingMeta};
+use acquisition::recording::Origin;
 use anyhow::{Context, Result};
 use serde::Serialize;
 use shared_types::messages::EstimateMsg;
@@ -127,8 +127,14 @@ pub(super) fn source_facts(
         let dir = path.parent().unwrap_or(Path::new(".")).to_path_buf();
         Ok((dir, meta.frame_rate_hz, Some(meta.origin)))
     } else {
+        // The whole recording is checked by the reader acquisition uses (metadata,
+        // every CSV row, the image files' presence) before any process starts: a
+        // recording it refuses is an error here, not an acquisition that exits and is
+        // restarted.
         let dir = PathBuf::from(&args.source);
-        let meta = RecordingMeta::read(&dir.join("recording.toml"))?;
+        let meta = acquisition::recording::Recording::open(&dir)
+            .with_context(|| format!("--source {}", dir.display()))?
+            .meta;
         Ok((dir, meta.frame_rate_hz, meta.origin))
     }
 }
