@@ -214,6 +214,15 @@ fn replace(path: &Path, from: &str, to: &str) {
     std::fs::write(path, text.replacen(from, to, 1)).unwrap();
 }
 
+/// Removes the left UAV's `[uav.left.mount_angles]` table from recording.toml.
+fn drop_left_mount_angles(root: &Path) {
+    let path = root.join("recording.toml");
+    let text = std::fs::read_to_string(&path).unwrap();
+    let start = text.find("[uav.left.mount_angles]").unwrap();
+    let end = text.find("[uav.left.camera]").unwrap();
+    std::fs::write(&path, format!("{}{}", &text[..start], &text[end..])).unwrap();
+}
+
 #[test]
 fn metadata_that_breaks_a_v2_rule_is_refused_with_the_rule() {
     let cases: [(&str, &str, &str); 5] = [
@@ -255,11 +264,7 @@ fn metadata_that_breaks_a_v2_rule_is_refused_with_the_rule() {
     }
     // A fixed mount with no angles.
     let (_d, root) = write(CameraMount::Fixed(Mount::NADIR));
-    let path = root.join("recording.toml");
-    let text = std::fs::read_to_string(&path).unwrap();
-    let start = text.find("[uav.left.mount_angles]").unwrap();
-    let end = text.find("[uav.left.camera]").unwrap();
-    std::fs::write(&path, format!("{}{}", &text[..start], &text[end..])).unwrap();
+    drop_left_mount_angles(&root);
     let e = open_err(&root);
     assert!(e.contains("needs [uav.left.mount_angles]"), "{e}");
 }
@@ -303,14 +308,7 @@ fn gimbal_angles_must_match_the_mounts() {
         "mount = \"fixed\"",
         "mount = \"gimbal\"",
     );
-    let toml = std::fs::read_to_string(root.join("recording.toml")).unwrap();
-    let start = toml.find("[uav.left.mount_angles]").unwrap();
-    let end = toml.find("[uav.left.camera]").unwrap();
-    std::fs::write(
-        root.join("recording.toml"),
-        format!("{}{}", &toml[..start], &toml[end..]),
-    )
-    .unwrap();
+    drop_left_mount_angles(&root);
     let e = open_err(&root);
     assert!(e.contains("its gimbal angles are empty"), "{e}");
 }

@@ -22,42 +22,6 @@ pub const TELEMETRY_HEADER: [&str; 10] = [
     "roll_deg",
 ];
 
-pub const TELEMETRY_GIMBAL_HEADER: [&str; 13] = [
-    "uav",
-    "frame",
-    "file",
-    "t_s",
-    "x_m",
-    "y_m",
-    "z_m",
-    "yaw_deg",
-    "pitch_deg",
-    "roll_deg",
-    "gimbal_yaw_deg",
-    "gimbal_pitch_deg",
-    "gimbal_roll_deg",
-];
-
-pub const TRUTH_GIMBAL_HEADER: [&str; 17] = [
-    "uav",
-    "frame",
-    "t_s",
-    "x_m",
-    "y_m",
-    "z_m",
-    "yaw_deg",
-    "pitch_deg",
-    "roll_deg",
-    "target_x_m",
-    "target_y_m",
-    "target_z_m",
-    "target_u_px",
-    "target_v_px",
-    "gimbal_yaw_deg",
-    "gimbal_pitch_deg",
-    "gimbal_roll_deg",
-];
-
 pub const TRUTH_HEADER: [&str; 14] = [
     "uav",
     "frame",
@@ -74,6 +38,28 @@ pub const TRUTH_HEADER: [&str; 14] = [
     "target_u_px",
     "target_v_px",
 ];
+
+/// Version 2: the headers with the three gimbal columns after the others, for a
+/// recording where a UAV has `mount = "gimbal"`.
+pub const TELEMETRY_GIMBAL_HEADER: [&str; 13] = with_gimbal_columns(TELEMETRY_HEADER);
+pub const TRUTH_GIMBAL_HEADER: [&str; 17] = with_gimbal_columns(TRUTH_HEADER);
+
+/// `header` followed by the gimbal columns (`M` must be `N` + 3: checked when compiled).
+const fn with_gimbal_columns<const N: usize, const M: usize>(
+    header: [&'static str; N],
+) -> [&'static str; M] {
+    let mut out = [""; M];
+    let mut i = 0;
+    while i < N {
+        out[i] = header[i];
+        i += 1;
+    }
+    out[N] = "gimbal_yaw_deg";
+    out[N + 1] = "gimbal_pitch_deg";
+    out[N + 2] = "gimbal_roll_deg";
+    assert!(M == N + 3);
+    out
+}
 
 /// One row of telemetry.csv: the measured state of one image.
 #[derive(Debug, Clone, PartialEq)]
