@@ -127,6 +127,12 @@ fn services_killed_at_random_moments_are_restarted_and_the_track_goes_on() {
         counters["matching.keyframes_restored"].as_u64().unwrap() >= 2 * 6,
         "{counters}"
     );
+    // Every restart found its keyframe store whole (a store naming a keyframe file
+    // that was never written is refused, and the rings are rebuilt from nothing).
+    assert!(
+        counters.get("matching.checkpoint_refused").is_none(),
+        "{counters}"
+    );
     // A resumed filter goes on as sure as before: a fresh one would start again from
     // σ = 15 m per axis (h_acc ≈ 21 m) after each geolocation restart.
     let h_acc: Vec<f64> = track

@@ -115,7 +115,7 @@ pub fn camera_to_gimbal() -> Matrix3<f64> {
 /// A camera's orientation on its UAV (recording format v2): the gimbal frame G
 /// relative to the body FRD frame, as aerospace Z-Y-X angles in **radians** (MAVLink's
 /// GIMBAL_DEVICE_ATTITUDE_STATUS in vehicle frame). A nadir camera is G = (0, −π/2, 0).
-#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct Mount(pub Attitude);
 
 impl Mount {

@@ -128,6 +128,14 @@ impl VisionChain {
             .map(|kf| KeyframeSnapshot::of(uav, kf))
     }
 
+    /// Keyframe `seq` of `uav`'s ring, if the ring holds it.
+    pub fn keyframe_snapshot(&self, uav: Uav, seq: u64) -> Option<KeyframeSnapshot> {
+        self.rings[uav.index()]
+            .iter()
+            .find(|kf| kf.seq == seq)
+            .map(|kf| KeyframeSnapshot::of(uav, kf))
+    }
+
     pub fn ring_index(&self) -> RingIndex {
         RingIndex {
             keyframes: [Uav::Left, Uav::Right]
@@ -167,10 +175,10 @@ impl VisionChain {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
 
-    fn snapshot(seq: u64) -> KeyframeSnapshot {
+    pub(crate) fn snapshot(seq: u64) -> KeyframeSnapshot {
         KeyframeSnapshot {
             uav: 1,
             seq,

@@ -77,8 +77,13 @@ impl RingStore {
         Ok(restored)
     }
 
-    /// Saves the keyframes just admitted (`admitted[uav]`) and the new index, then
-    /// removes the files of evicted keyframes.
+    /// After an admission (`admitted[uav]`): writes every keyframe of the rings not on
+    /// disk yet, then the new index, then removes the files of evicted keyframes.
+    /// Every keyframe, not only each ring's newest: a refresh's admission lands between
+    /// pairs, so a ring can gain two keyframes between saves; writing only the newest
+    /// left the index naming a file that was never written, and the next incarnation
+    /// refused the store and rebuilt its rings (2.6 s without estimates in
+    /// `e2e_chaos`).
     pub fn save(
         &mut self,
         chain: &VisionChain,
@@ -87,25 +92,65 @@ impl RingStore {
         if !admitted.iter().any(|a| *a) {
             return Ok(());
         }
-        for uav in [Uav::Left, Uav::Right] {
-            if !admitted[uav.index()] {
-                continue;
-            }
-            if let Some(kf) = chain.newest_keyframe(uav) {
-                checkpoint::write(&self.keyframe_path(uav.index(), kf.seq), KEYFRAME_KIND, &kf)?;
-                self.on_disk.insert((uav.index(), kf.seq));
-            }
-        }
         let index = chain.ring_index();
-        checkpoint::write(&self.index_path(), INDEX_KIND, &index)?;
         let named: BTreeSet<(usize, u64)> = (0..2)
             .flat_map(|u| index.keyframes[u].iter().map(move |s| (u, *s)))
             .collect();
+        for &(u, seq) in named.difference(&self.on_disk.clone()) {
+            let uav = [Uav::Left, Uav::Right][u];
+            if let Some(kf) = chain.keyframe_snapshot(uav, seq) {
+                checkpoint::write(&self.keyframe_path(u, seq), KEYFRAME_KIND, &kf)?;
+                self.on_disk.insert((u, seq));
+            }
+        }
+        checkpoint::write(&self.index_path(), INDEX_KIND, &index)?;
         let evicted: Vec<(usize, u64)> = self.on_disk.difference(&named).copied().collect();
         for (u, s) in evicted {
             let _ = std::fs::remove_file(self.keyframe_path(u, s));
             self.on_disk.remove(&(u, s));
         }
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::ring_snapshot::tests::snapshot;
+    use crate::ring_snapshot::RingIndex;
+
+    fn chain_with(keyframes: &[u64]) -> VisionChain {
+        let config = crate::MatchingConfig::default();
+        let mut chain = VisionChain::new(config, geolocation::EstimatorConfig::default()).unwrap();
+        let index = RingIndex {
+            keyframes: [vec![], keyframes.to_vec()],
+            smoothed: [None, None],
+        };
+        chain
+            .restore_rings(&index, |_, seq| Ok(snapshot(seq)))
+            .unwrap();
+        chain
+    }
+
+    /// Two keyframes admitted between saves (a refresh's admission landing, then the
+    /// pair's own): both are written, and the next incarnation restores both.
+    #[test]
+    fn every_keyframe_the_index_names_is_written() {
+        let dir = std::env::temp_dir().join(format!("dualgeo-ring-store-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        let mut store = RingStore::open(&dir).unwrap();
+        store.save(&chain_with(&[3]), [false, true]).unwrap();
+        store.save(&chain_with(&[3, 5, 9]), [false, true]).unwrap();
+        for seq in [3, 5, 9] {
+            assert!(
+                dir.join(format!("matching/kf-1-{seq}.ckpt")).is_file(),
+                "{seq}"
+            );
+        }
+        let mut next = chain_with(&[]);
+        let restored = RingStore::open(&dir).unwrap().restore(&mut next);
+        let _ = std::fs::remove_dir_all(&dir);
+        assert_eq!(restored, Ok(3));
+        assert_eq!(next.ring_index().keyframes[1], vec![3, 5, 9]);
     }
 }
