@@ -4,7 +4,7 @@
 //!
 //! Type names are pinned with `#[type_name]` so separately built processes agree.
 
-use crate::conventions::Attitude;
+use crate::conventions::{Attitude, Mount};
 use iceoryx2::prelude::ZeroCopySend;
 use nalgebra::Point3;
 
@@ -50,6 +50,19 @@ impl PoseSample {
 
     pub fn attitude(&self) -> Attitude {
         Attitude::from_degrees(self.yaw_deg, self.pitch_deg, self.roll_deg)
+    }
+
+    /// The pose of a camera on `mount` when this is its body's: the same position, the
+    /// attitude turned into the equivalent nadir camera's
+    /// ([`Mount::equivalent_nadir_attitude`]; the yaw bias carries over).
+    pub fn on_mount(self, mount: Mount) -> PoseSample {
+        let a = mount.equivalent_nadir_attitude(self.attitude());
+        PoseSample {
+            yaw_deg: a.yaw.to_degrees(),
+            pitch_deg: a.pitch.to_degrees(),
+            roll_deg: a.roll.to_degrees(),
+            ..self
+        }
     }
 
     pub fn is_finite(&self) -> bool {

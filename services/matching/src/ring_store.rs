@@ -96,7 +96,8 @@ impl RingStore {
         let named: BTreeSet<(usize, u64)> = (0..2)
             .flat_map(|u| index.keyframes[u].iter().map(move |s| (u, *s)))
             .collect();
-        for &(u, seq) in named.difference(&self.on_disk.clone()) {
+        let missing: Vec<(usize, u64)> = named.difference(&self.on_disk).copied().collect();
+        for (u, seq) in missing {
             let uav = [Uav::Left, Uav::Right][u];
             if let Some(kf) = chain.keyframe_snapshot(uav, seq) {
                 checkpoint::write(&self.keyframe_path(u, seq), KEYFRAME_KIND, &kf)?;

@@ -136,13 +136,7 @@ pub fn camera_pose(
         // Refused by `Recording::open`: a gimbal row without angles.
         (CameraMount::Gimbal, None) => Mount::NADIR,
     };
-    let a = mount.equivalent_nadir_attitude(pose.attitude());
-    PoseSample {
-        yaw_deg: a.yaw.to_degrees(),
-        pitch_deg: a.pitch.to_degrees(),
-        roll_deg: a.roll.to_degrees(),
-        ..pose
-    }
+    pose.on_mount(mount)
 }
 
 fn csv_error(

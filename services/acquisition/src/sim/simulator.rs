@@ -208,8 +208,8 @@ impl Simulator {
         let [x, y, z] = state.uav_position[i];
         let [yaw, pitch, roll] = state.uav_attitude[i];
         let mount = self.config.camera.mount();
-        let camera = |a: Attitude| mount.map_or(a, |m| m.equivalent_nadir_attitude(a));
-        let attitude = camera(Attitude::new(yaw, pitch, roll));
+        let body = Attitude::new(yaw, pitch, roll);
+        let attitude = mount.map_or(body, |m| m.equivalent_nadir_attitude(body));
         let view = CameraView {
             position: Point3::new(x, y, z),
             rotation: camera_to_world(attitude),
@@ -222,7 +222,7 @@ impl Simulator {
             rand_distr::StandardNormal.sample(rng)
         });
         let bias = self.config.bias.at(state.t_s)[i];
-        let body_true = pose(x, y, z, Attitude::new(yaw, pitch, roll));
+        let body_true = pose(x, y, z, body);
         let body_measured = pose(
             x + noise[0],
             y + noise[1],
@@ -235,13 +235,7 @@ impl Simulator {
         );
         let (true_pose, measured) = match mount {
             None => (body_true, body_measured),
-            Some(_) => {
-                let at = |p: &PoseSample, a: Attitude| pose(p.x_m, p.y_m, p.z_m, camera(a));
-                (
-                    at(&body_true, Attitude::new(yaw, pitch, roll)),
-                    at(&body_measured, body_measured.attitude()),
-                )
-            }
+            Some(m) => (body_true.on_mount(m), body_measured.on_mount(m)),
         };
         let (w, h) = (view.width as f64, view.height as f64);
         let lens = self.distortion();
