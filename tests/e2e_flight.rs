@@ -161,4 +161,14 @@ fn damaged_telemetry_is_dropped_and_counted_and_no_overlap_is_refused() {
     let o = run(&flight, &dir.0.join("out2"));
     assert!(!o.status.success());
     assert!(text(&o).contains("no overlap"), "{}", text(&o));
+
+    // A video the flight names is missing: the reader acquisition uses refuses it
+    // before any process starts (no service ran, none was restarted).
+    std::fs::write(&flight, toml).unwrap();
+    std::fs::remove_file(dir.0.join("flight/right.mp4")).unwrap();
+    let out3 = dir.0.join("out3");
+    let o = run(&flight, &out3);
+    assert!(!o.status.success());
+    assert!(text(&o).contains("right.mp4"), "{}", text(&o));
+    assert!(!out3.join("stats").exists(), "no service started");
 }

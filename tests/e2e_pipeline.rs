@@ -281,6 +281,27 @@ fn bad_input_at_the_boundary_is_a_clear_error() {
         "{err}"
     );
     assert!(!out.join("stats").exists(), "no service started");
+
+    // A service refused its input or configuration exits 78 (not restarted by the
+    // supervisor, `shell::EXIT_PERMANENT`); it fails before it opens any shared memory.
+    let binary = |name: &str| {
+        std::path::Path::new(env!("CARGO_BIN_EXE_dualgeo"))
+            .with_file_name(format!("dualgeo-{name}"))
+    };
+    let service = |name: &str, args: &[&str]| {
+        Command::new(binary(name))
+            .args(["--run-id", "bad-input", "--stats-dir", &dir.s("stats")])
+            .args(args)
+            .output()
+            .expect("spawn a service")
+    };
+    let o = service("acquisition", &["--source", &dir.s("nowhere")]);
+    assert_eq!(o.status.code(), Some(78), "{}", text(&o.stderr));
+    assert!(text(&o.stderr).contains("nowhere"), "{}", text(&o.stderr));
+    std::fs::write(&config, "[detection]\nhue = 3\n").unwrap();
+    let o = service("detection", &["--config", config.to_str().unwrap()]);
+    assert_eq!(o.status.code(), Some(78), "{}", text(&o.stderr));
+    assert!(text(&o.stderr).contains("hue"), "{}", text(&o.stderr));
 }
 
 /// `dualgeo run ARGS` with its output captured.

@@ -92,6 +92,76 @@ impl StatsSaver {
     }
 }
 
+/// The exit status of a service that refused its input or its configuration
+/// (sysexits' `EX_CONFIG`). The supervisor does not restart it: a new process would be
+/// refused the same way (as systemd's `RestartPreventExitStatus`). Any other failure
+/// (a crash, a lost shared-memory service) is restarted by the policy.
+pub const EXIT_PERMANENT: u8 = 78;
+
+/// An error that restarting the process cannot cure: a bad configuration, a source that
+/// cannot be read. [`exit_code`] turns it into [`EXIT_PERMANENT`]; so does a
+/// [`ShellError::Config`] anywhere in an error's chain.
+#[derive(Debug, thiserror::Error)]
+#[error("{what}")]
+pub struct Permanent {
+    what: String,
+    #[source]
+    source: Option<Box<dyn std::error::Error + Send + Sync + 'static>>,
+}
+
+impl Permanent {
+    /// `what` was refused, because of `source`.
+    pub fn new(
+        what: impl Into<String>,
+        source: impl Into<Box<dyn std::error::Error + Send + Sync + 'static>>,
+    ) -> Self {
+        Self {
+            what: what.into(),
+            source: Some(source.into()),
+        }
+    }
+
+    /// `what` was refused; it says why itself.
+    pub fn because(what: impl Into<String>) -> Self {
+        Self {
+            what: what.into(),
+            source: None,
+        }
+    }
+}
+
+/// Whether `error` or anything in its chain of sources is permanent ([`Permanent`], or a
+/// configuration the shell could not read).
+pub fn is_permanent(error: &(dyn std::error::Error + 'static)) -> bool {
+    std::iter::successors(Some(error), |e| e.source()).any(|e| {
+        e.is::<Permanent>()
+            || matches!(
+                e.downcast_ref::<ShellError>(),
+                Some(ShellError::Config { .. })
+            )
+    })
+}
+
+/// A service's exit: 0 on success; on failure the error and its causes on stderr (as
+/// `fn main() -> Result` prints them) and [`EXIT_PERMANENT`] when the error is
+/// permanent ([`is_permanent`]), else 1.
+pub fn exit_code<E>(result: Result<(), E>) -> std::process::ExitCode
+where
+    E: std::fmt::Debug + AsRef<dyn std::error::Error + Send + Sync + 'static>,
+{
+    match result {
+        Ok(()) => std::process::ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("Error: {e:?}");
+            if is_permanent(e.as_ref()) {
+                std::process::ExitCode::from(EXIT_PERMANENT)
+            } else {
+                std::process::ExitCode::FAILURE
+            }
+        }
+    }
+}
+
 #[derive(Debug, thiserror::Error)]
 pub enum ShellError {
     #[error("{path}: {detail}")]
@@ -277,6 +347,38 @@ impl SeqGaps {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn permanent_errors_are_found_anywhere_in_the_chain() {
+        use anyhow::Context;
+        let config = ShellError::Config {
+            path: "x.toml".into(),
+            detail: "[detection]: unknown field `hue`".into(),
+        };
+        let from_config: anyhow::Result<()> = Err(config).context("load the configuration");
+        let e = from_config.unwrap_err();
+        assert!(is_permanent(e.as_ref()));
+        let marked: anyhow::Result<()> = Err(anyhow::Error::new(Permanent::new(
+            "--source /nowhere",
+            std::io::Error::from(std::io::ErrorKind::NotFound),
+        )))
+        .context("open the source");
+        assert!(is_permanent(marked.unwrap_err().as_ref()));
+        let transient = anyhow::anyhow!("iceoryx2 service lost").context("publish frame");
+        assert!(!is_permanent(transient.as_ref()));
+        assert!(!is_permanent(
+            anyhow::Error::new(ShellError::Wait("interrupted".into())).as_ref()
+        ));
+        assert_eq!(
+            exit_code::<anyhow::Error>(Ok(())),
+            std::process::ExitCode::SUCCESS
+        );
+        assert_eq!(
+            exit_code(Err(anyhow::Error::new(Permanent::because("bad model")))),
+            std::process::ExitCode::from(EXIT_PERMANENT)
+        );
+        assert_eq!(exit_code(Err(transient)), std::process::ExitCode::FAILURE);
+    }
 
     #[test]
     fn gaps_count_missing_sequence_numbers() {

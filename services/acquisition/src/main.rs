@@ -52,7 +52,7 @@ use iceoryx2::prelude::EventId;
 use shared_types::clock::{elapsed_us, monotonic_ns};
 use shared_types::conventions::Uav;
 use shared_types::messages::{FrameHeader, PixelFormat};
-use shared_types::shell::{apply_realtime, init_tracing, ServiceArgs, StatsSaver};
+use shared_types::shell::{self, apply_realtime, init_tracing, Permanent, ServiceArgs, StatsSaver};
 use shared_types::stats::StageStats;
 use shared_types::transport::{Endpoint, FramePublisher, Ipc, Stage, END_OF_STREAM_EVENT};
 use std::path::PathBuf;
@@ -179,14 +179,22 @@ fn count_source(source: &mut dyn FrameSource, stats: &mut StageStats) {
     }
 }
 
-fn main() -> Result<()> {
+/// Exits with [`shell::EXIT_PERMANENT`] when the input or configuration was refused
+/// (the supervisor does not restart that), 1 on any other failure.
+fn main() -> std::process::ExitCode {
+    shell::exit_code(run())
+}
+
+fn run() -> Result<()> {
     let args = Args::parse();
     init_tracing("acquisition");
     // Before the source starts its threads: they inherit it (the simulator's renderer
     // goes back to the normal scheduler, `source::render_pool`).
-    apply_realtime(args.service.config.as_deref(), "acquisition")?;
-    let rate = parse_rate(&args.rate)?;
-    let mut source = acquisition::source::open(&args.source, &args.scenario)?;
+    apply_realtime(args.service.config.as_deref(), "acquisition")
+        .map_err(|e| Permanent::new("[realtime]", e))?;
+    let rate = parse_rate(&args.rate).map_err(|e| Permanent::because(e.to_string()))?;
+    let mut source = acquisition::source::open(&args.source, &args.scenario)
+        .map_err(|e| Permanent::new(format!("--source {}", args.source), e))?;
     let (width, height) = source.size();
     let stride = width as usize * 3;
     let frame_bytes = stride * height as usize;
@@ -256,11 +264,14 @@ fn main() -> Result<()> {
     };
     let mut gate = LiveGate::new((width, height), source.period_s());
     let mut injector = match (live_sim, args.scenario.inject_faults) {
-        (Some(seed), Some(rate)) => Some(
-            FaultInjector::new(seed, rate)
-                .with_context(|| format!("--inject-faults must be in [0, 1], got {rate}"))?,
-        ),
-        (_, Some(_)) => bail!("--inject-faults works with the live simulator only"),
+        (Some(seed), Some(rate)) => Some(FaultInjector::new(seed, rate).ok_or_else(|| {
+            Permanent::because(format!("--inject-faults must be in [0, 1], got {rate}"))
+        })?),
+        (_, Some(_)) => {
+            return Err(
+                Permanent::because("--inject-faults works with the live simulator only").into(),
+            )
+        }
         _ => None,
     };
     tracing::info!(run = endpoint.run_id(), source = %args.source, width, height, ?rate, "acquisition streaming");

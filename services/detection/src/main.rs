@@ -32,7 +32,8 @@ use shared_types::messages::FrameHeader;
 use shared_types::messages::{DetectionMsg, EstimateMsg};
 use shared_types::service_names::Topic;
 use shared_types::shell::{
-    apply_realtime, init_tracing, load_section, serve, SeqGaps, ServiceArgs, StatsSaver,
+    self, apply_realtime, init_tracing, load_section, serve, Permanent, SeqGaps, ServiceArgs,
+    StatsSaver,
 };
 use shared_types::stats::StageStats;
 use shared_types::transport::{Endpoint, MsgPublisher, Stage};
@@ -44,13 +45,21 @@ struct Args {
     service: ServiceArgs,
 }
 
-fn main() -> Result<()> {
+/// Exits with [`shell::EXIT_PERMANENT`] when the input or configuration was refused
+/// (the supervisor does not restart that), 1 on any other failure.
+fn main() -> std::process::ExitCode {
+    shell::exit_code(run())
+}
+
+fn run() -> Result<()> {
     let args = Args::parse();
     init_tracing("detection");
-    apply_realtime(args.service.config.as_deref(), "detection")?;
+    apply_realtime(args.service.config.as_deref(), "detection")
+        .map_err(|e| Permanent::new("[realtime]", e))?;
     let config: ColourBlobConfig = load_section(args.service.config.as_deref(), "detection")?;
     let gate_config = config.gate;
-    let detector = TrackedDetector::new(config).context("detector configuration")?;
+    let detector =
+        TrackedDetector::new(config).map_err(|e| Permanent::new("[detection] configuration", e))?;
     let endpoint = Endpoint::new(&args.service.run_id, "detection")?;
     let frames = [
         endpoint.frame_subscriber(Uav::Left)?,

@@ -27,7 +27,8 @@ use shared_types::deadline::{Deadlines, Verdict};
 use shared_types::messages::{EstimateMsg, ObservationSetMsg};
 use shared_types::service_names::Topic;
 use shared_types::shell::{
-    apply_realtime, init_tracing, load_section, serve, SeqGaps, ServiceArgs, StatsSaver,
+    self, apply_realtime, init_tracing, load_section, serve, Permanent, SeqGaps, ServiceArgs,
+    StatsSaver,
 };
 use shared_types::stats::StageStats;
 use shared_types::transport::{Endpoint, Stage};
@@ -72,12 +73,21 @@ fn resume(
     Some((found.last_pair_seq, found.last_t_s))
 }
 
-fn main() -> Result<()> {
+/// Exits with [`shell::EXIT_PERMANENT`] when the input or configuration was refused
+/// (the supervisor does not restart that), 1 on any other failure.
+fn main() -> std::process::ExitCode {
+    shell::exit_code(run())
+}
+
+fn run() -> Result<()> {
     let args = Args::parse();
     init_tracing("geolocation");
-    apply_realtime(args.service.config.as_deref(), "geolocation")?;
+    apply_realtime(args.service.config.as_deref(), "geolocation")
+        .map_err(|e| Permanent::new("[realtime]", e))?;
     let config: EstimatorConfig = load_section(args.service.config.as_deref(), "estimator")?;
-    config.validate().context("[estimator] configuration")?;
+    config
+        .validate()
+        .map_err(|e| Permanent::new("[estimator] configuration", e))?;
     let endpoint = Endpoint::new(&args.service.run_id, "geolocation")?;
     let subscriber = endpoint.subscriber::<ObservationSetMsg>(Topic::Observations)?;
     let publisher = endpoint.publisher::<EstimateMsg>(Topic::Estimates)?;

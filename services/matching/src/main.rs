@@ -49,7 +49,8 @@ use shared_types::deadline::Deadlines;
 use shared_types::messages::{DetectionMsg, ObservationSetMsg};
 use shared_types::service_names::Topic;
 use shared_types::shell::{
-    apply_realtime, init_tracing, load_section, serve, SeqGaps, ServiceArgs, StatsSaver, Wake,
+    self, apply_realtime, init_tracing, load_section, serve, Permanent, SeqGaps, ServiceArgs,
+    StatsSaver, Wake,
 };
 use shared_types::transport::{Endpoint, FrameSubscriber, Stage};
 
@@ -102,14 +103,21 @@ fn on_frames(
     Ok(())
 }
 
-fn main() -> Result<()> {
+/// Exits with [`shell::EXIT_PERMANENT`] when the input or configuration was refused
+/// (the supervisor does not restart that), 1 on any other failure.
+fn main() -> std::process::ExitCode {
+    shell::exit_code(run())
+}
+
+fn run() -> Result<()> {
     let args = Args::parse();
     init_tracing("matching");
     let path = args.service.config.as_deref();
-    apply_realtime(path, "matching")?;
+    apply_realtime(path, "matching").map_err(|e| Permanent::new("[realtime]", e))?;
     let config: MatchingConfig = load_section(path, "matching")?;
     let estimator: EstimatorConfig = load_section(path, "estimator")?;
-    let mut intake = Intake::new(config.clone(), estimator)?;
+    let mut intake = Intake::new(config.clone(), estimator)
+        .map_err(|e| Permanent::new("[matching] configuration", e))?;
     intake.trace = args.service.tracer("matching");
     intake.deadlines = Deadlines::new(args.service.flow_controlled);
     if let Some(dir) = &args.service.state_dir {

@@ -132,6 +132,17 @@ pub fn run(args: &RunArgs) -> Result<()> {
     }
     // Before any process starts: a bad address or a missing origin is refused here.
     let (_, _, origin) = outputs::source_facts(args, Path::new(""))?;
+    // A recorded flight is opened by the reader acquisition uses (both logs parsed,
+    // both videos opened), as a recording is by `source_facts`: one it refuses is an
+    // error here, not a service that exits. A live flight's sockets are acquisition's.
+    if is_flight {
+        let meta = acquisition::flight::FlightMeta::read(source).map_err(anyhow::Error::msg)?;
+        if !meta.is_live() {
+            acquisition::flight::FlightSource::open(source)
+                .map_err(anyhow::Error::msg)
+                .with_context(|| format!("--source {}", source.display()))?;
+        }
+    }
     let live =
         live_out::LiveOutputs::open(&args.live_out, origin, outputs::source_geoid_height(args)?)?;
     let out = &args.out;

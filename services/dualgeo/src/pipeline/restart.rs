@@ -8,6 +8,8 @@
 //!   `--max-restarts` deaths of one service within `--restart-window-s` end the run as
 //!   before, naming the service and its last exit status.
 //! - `--restart never`: the first death ends the run.
+//! - Either way, a service that exits with `shell::EXIT_PERMANENT` (78) refused its
+//!   input or configuration and is not restarted: the run ends, naming it.
 //!
 //! Before a restart, what the dead process left in iceoryx2 (its node, ports and
 //! loaned samples) is removed (`clean_dead_nodes`: the child has been reaped by
@@ -25,6 +27,7 @@ use anyhow::{bail, Result};
 use serde::Serialize;
 use shared_types::clock::monotonic_ns;
 use shared_types::messages::{EstimateMsg, EstimateStatus};
+use shared_types::shell::EXIT_PERMANENT;
 use shared_types::transport::clean_dead_nodes;
 use std::collections::{BTreeMap, VecDeque};
 use std::time::{Duration, Instant};
@@ -48,6 +51,12 @@ pub struct RestartArgs {
     /// The window of `--max-restarts`, seconds.
     #[arg(long, default_value_t = 60.0)]
     pub restart_window_s: f64,
+}
+
+/// A service that exits with [`EXIT_PERMANENT`] refused its input or configuration:
+/// it is never restarted, whatever the mode.
+pub fn is_permanent(status: std::process::ExitStatus) -> bool {
+    status.code() == Some(i32::from(EXIT_PERMANENT))
 }
 
 const BACKOFF_FIRST: Duration = Duration::from_millis(250);
@@ -134,6 +143,14 @@ impl Supervision {
             let Some(status) = s.poll()? else {
                 continue;
             };
+            if is_permanent(status) {
+                bail!(
+                    "the {} service refused its input or configuration ({}); a restart \
+                     would be refused the same way, so the run ends. Its log is above",
+                    s.name,
+                    describe(status)
+                );
+            }
             if self.args.restart == RestartMode::Never {
                 bail!(
                     "the {} service ended unexpectedly ({}); its log is above",
@@ -280,6 +297,17 @@ mod tests {
             },
             ..Default::default()
         }
+    }
+
+    #[test]
+    fn only_the_permanent_exit_status_prevents_a_restart() {
+        use std::os::unix::process::ExitStatusExt;
+        use std::process::ExitStatus;
+        // wait(2) statuses: the exit code in the second byte, a signal in the first.
+        assert!(is_permanent(ExitStatus::from_raw(78 << 8)));
+        assert!(!is_permanent(ExitStatus::from_raw(1 << 8)));
+        assert!(!is_permanent(ExitStatus::from_raw(0)));
+        assert!(!is_permanent(ExitStatus::from_raw(libc::SIGKILL)));
     }
 
     #[test]
