@@ -325,12 +325,19 @@ fn the_writer_takes_gimbal_angles_exactly_for_a_gimbal() {
         .unwrap();
 }
 
-/// The simulator's tilted camera written as v2 and read back: the truth pixel of the
-/// target, which the simulator projected through the camera it rendered, is where the
-/// reader's camera pose (the body's truth and the mount) projects the target.
+/// The simulator's tilted and gimballed cameras written as v2 and read back: the truth
+/// pixel of the target, which the simulator projected through the camera it rendered,
+/// is where the reader's camera pose (the body's truth and the mount, or the gimbal's
+/// true angles of that image) projects the target.
 #[test]
-fn a_simulated_tilted_recording_reads_back_as_the_camera_that_rendered_it() {
-    let mut config = Presets::builtin().get("tilted").unwrap();
+fn simulated_tilted_and_gimbal_recordings_read_back_as_the_cameras_that_rendered_them() {
+    for preset in ["tilted", "gimbal"] {
+        reads_back_as_the_camera_that_rendered_it(preset);
+    }
+}
+
+fn reads_back_as_the_camera_that_rendered_it(preset: &str) {
+    let mut config = Presets::builtin().get(preset).unwrap();
     config.duration_s = 0.2;
     config.camera.width = 160;
     config.camera.height = 120;
@@ -338,8 +345,9 @@ fn a_simulated_tilted_recording_reads_back_as_the_camera_that_rendered_it() {
     let intrinsics = sim.intrinsics();
     let dir = TempDir::new().unwrap();
     let root = dir.path().join("rec");
-    record(&mut sim, "tilted", &root, ImageEncoding::Png, |_, _| {}).unwrap();
+    record(&mut sim, preset, &root, ImageEncoding::Png, |_, _| {}).unwrap();
     let rec = Recording::open(&root).unwrap();
+    assert_eq!(rec.meta.has_gimbal_columns(), preset == "gimbal");
     let truth = rec.truth.as_ref().unwrap();
     let mut checked = 0;
     for (row, t) in rec.telemetry.iter().zip(truth) {
@@ -350,11 +358,14 @@ fn a_simulated_tilted_recording_reads_back_as_the_camera_that_rendered_it() {
         let px = intrinsics.project(r.transpose() * p).expect("in front");
         assert!(
             (px.x - u).abs() < 1e-6 && (px.y - v).abs() < 1e-6,
-            "{px} against {u}, {v}"
+            "{preset}: {px} against {u}, {v}"
         );
         checked += 1;
     }
-    assert!(checked >= 10, "{checked} frames with the target in view");
+    assert!(
+        checked >= 10,
+        "{preset}: {checked} frames with the target in view"
+    );
 }
 
 /// The format lists `truth_targets.csv` (every moving vehicle, for multi-target

@@ -89,6 +89,13 @@ pub struct MatchingConfig {
     pub orb_levels: i32,
     /// How ORB ranks its keypoints.
     pub orb_score: OrbScore,
+    /// A frame whose optical axis is more than this many degrees off the vertical (by
+    /// its measured pitch and roll: a tilted or gimballed camera) has its ORB features
+    /// found on the view a camera looking straight down would have (`rectify.rs`): ORB
+    /// does not survive the perspective between two oblique UAVs. 20° leaves every
+    /// nadir frame of the suite as it is (their tilt from bank and AHRS noise stays
+    /// under 15°); 90 or more: never.
+    pub rectify_above_tilt_deg: f64,
     /// Refine keypoints to sub-pixel positions (`cornerSubPix`). Off by default: with
     /// the ground-plane F and FAST ranking it made every Table 1 figure worse and cost
     /// ~4 ms per pair (docs/matching.md).
@@ -174,6 +181,7 @@ impl Default for MatchingConfig {
             orb_fast_thresholds: vec![20, 10, 5],
             orb_levels: 3,
             orb_score: OrbScore::Fast,
+            rectify_above_tilt_deg: 20.0,
             subpixel_keypoints: false,
             ratio_test: 0.8,
             retry_ratio_test: 0.0,
@@ -227,6 +235,8 @@ impl MatchingConfig {
             && self.ratio_test <= 1.0
             && (0.0..=1.0).contains(&self.retry_ratio_test)
             && self.orb_spread_cells <= 4096
+            && self.rectify_above_tilt_deg.is_finite()
+            && self.rectify_above_tilt_deg >= 0.0
             && (1..=16).contains(&self.orb_candidate_factor)
             && self.orb_fast_thresholds.len() <= 8
             && self

@@ -7,8 +7,13 @@ use opencv::prelude::*;
 use crate::config::{MatchingConfig, OrbScore};
 use crate::grid::PointGrid;
 use crate::hamming::{pack, Descriptor};
+use crate::rectify::Rectification;
 use shared_types::conventions::Intrinsics;
 use shared_types::lens::Distortion;
+
+/// Keypoints of a rectified view stay this far (pixels, the ORB patch's size) inside
+/// the frame's footprint.
+const RECTIFIED_EDGE_PX: i32 = 31;
 
 /// Cell size of [`Features::grid`], pixels.
 const GRID_CELL_PX: f32 = 32.0;
@@ -69,6 +74,13 @@ impl Features {
 pub struct OrbExtractor {
     orb: cv::Ptr<opencv::features2d::ORB>,
     gray: cv::Mat,
+    /// A rectified view's pixels and keypoint mask, and the frame's footprint
+    /// (`extract_rectified`), kept between frames.
+    warped: cv::Mat,
+    mask: cv::Mat,
+    footprint: cv::Mat,
+    /// `rectify_above_tilt_deg`.
+    pub rectify_above_tilt_deg: f64,
     subpixel: bool,
     budget: usize,
     scale_with_area: bool,
@@ -130,6 +142,10 @@ impl OrbExtractor {
                 thresholds[0],
             )?,
             gray: cv::Mat::default(),
+            warped: cv::Mat::default(),
+            mask: cv::Mat::default(),
+            footprint: cv::Mat::default(),
+            rectify_above_tilt_deg: config.rectify_above_tilt_deg,
             subpixel: config.subpixel_keypoints,
             budget: config.orb_features.max(0) as usize,
             scale_with_area: config.orb_scale_with_area,
@@ -159,14 +175,126 @@ impl OrbExtractor {
         &mut self,
         frame: &cv::Mat,
     ) -> opencv::Result<(Features, ExtractReport)> {
-        let gray = if frame.channels() == 3 {
-            opencv::imgproc::cvt_color_def(frame, &mut self.gray, opencv::imgproc::COLOR_BGR2GRAY)?;
-            &self.gray
-        } else {
-            frame
-        };
+        let grey = self.grey_of(frame)?;
+        let gray = grey.as_ref().unwrap_or(frame);
+        let (width, height) = (gray.cols(), gray.rows());
+        let budget = self.budget_for(width, height);
+        let detected = self.detect(gray, &cv::no_array(), budget);
+        if let Some(g) = grey {
+            self.gray = g;
+        }
+        let (points, packed, report) = detected?;
+        let features = Features::new(
+            points.to_vec(),
+            packed,
+            width.max(0) as u32,
+            height.max(0) as u32,
+        );
+        Ok((features, report))
+    }
+
+    /// ORB on `view`, the frame warped to look straight down (`crate::rectify`): the
+    /// keypoints are found and described on the view, inside the frame's footprint, and
+    /// returned at their positions in the frame. The budget is the frame's.
+    pub fn extract_rectified(
+        &mut self,
+        frame: &cv::Mat,
+        view: &Rectification,
+    ) -> opencv::Result<(Features, ExtractReport)> {
+        let grey = self.grey_of(frame)?;
+        let gray = grey.as_ref().unwrap_or(frame);
+        let (width, height) = (gray.cols(), gray.rows());
+        let budget = self.budget_for(width, height);
+        let h = view.homography;
+        let h_cv = cv::Mat::from_slice_2d(&[
+            [h[(0, 0)], h[(0, 1)], h[(0, 2)]],
+            [h[(1, 0)], h[(1, 1)], h[(1, 2)]],
+            [h[(2, 0)], h[(2, 1)], h[(2, 2)]],
+        ])?;
+        let size = cv::Size::new(view.size[0], view.size[1]);
+        let mut warped = std::mem::take(&mut self.warped);
+        let mut mask = std::mem::take(&mut self.mask);
+        let mut footprint = std::mem::take(&mut self.footprint);
+        opencv::imgproc::warp_perspective(
+            gray,
+            &mut warped,
+            &h_cv,
+            size,
+            opencv::imgproc::INTER_LINEAR,
+            cv::BORDER_REPLICATE,
+            cv::Scalar::default(),
+        )?;
+        // Keypoints only where the frame is, a patch's half-width inside its edge (the
+        // replicated border has no texture of its own, but its seam does).
+        if let Some(g) = grey {
+            self.gray = g;
+        }
+        if (footprint.cols(), footprint.rows()) != (width, height) {
+            footprint = cv::Mat::new_rows_cols_with_default(
+                height,
+                width,
+                cv::CV_8UC1,
+                cv::Scalar::all(255.0),
+            )?;
+        }
+        opencv::imgproc::warp_perspective(
+            &footprint,
+            &mut mask,
+            &h_cv,
+            size,
+            opencv::imgproc::INTER_NEAREST,
+            cv::BORDER_CONSTANT,
+            cv::Scalar::all(0.0),
+        )?;
+        let kernel = opencv::imgproc::get_structuring_element_def(
+            opencv::imgproc::MORPH_RECT,
+            cv::Size::new(RECTIFIED_EDGE_PX, RECTIFIED_EDGE_PX),
+        )?;
+        let mut eroded = cv::Mat::default();
+        opencv::imgproc::erode_def(&mask, &mut eroded, &kernel)?;
+        let detected = self.detect(&warped, &eroded, budget);
+        (self.warped, self.mask, self.footprint) = (warped, eroded, footprint);
+        let (points, packed, report) = detected?;
+        let back = h.try_inverse().ok_or_else(|| {
+            opencv::Error::new(cv::StsBadArg, "rectifying homography is singular")
+        })?;
+        let mut kept_points = Vec::with_capacity(points.len());
+        let mut kept = Vec::with_capacity(points.len());
+        for (p, d) in points.iter().zip(packed) {
+            let q = back * nalgebra::Vector3::new(p.x as f64, p.y as f64, 1.0);
+            let (u, v) = (q.x / q.z, q.y / q.z);
+            let inside = q.z > 0.0
+                && (0.0..=(width - 1) as f64).contains(&u)
+                && (0.0..=(height - 1) as f64).contains(&v);
+            if inside {
+                kept_points.push(cv::Point2f::new(u as f32, v as f32));
+                kept.push(d);
+            }
+        }
+        let features = Features::new(kept_points, kept, width.max(0) as u32, height.max(0) as u32);
+        Ok((features, report))
+    }
+
+    /// A BGR frame in grey, in the extractor's buffer taken out of it (the caller puts
+    /// it back); none for a frame already grey.
+    fn grey_of(&mut self, frame: &cv::Mat) -> opencv::Result<Option<cv::Mat>> {
+        if frame.channels() != 3 {
+            return Ok(None);
+        }
+        let mut grey = std::mem::take(&mut self.gray);
+        opencv::imgproc::cvt_color_def(frame, &mut grey, opencv::imgproc::COLOR_BGR2GRAY)?;
+        Ok(Some(grey))
+    }
+
+    /// FAST (thresholds lowered while the image has fewer candidates than the budget),
+    /// spread, described and packed; sub-pixel positions when configured.
+    fn detect(
+        &mut self,
+        gray: &cv::Mat,
+        mask: &impl cv::ToInputArray,
+        budget: usize,
+    ) -> opencv::Result<(cv::Vector<cv::Point2f>, Vec<Descriptor>, ExtractReport)> {
         let mut report = ExtractReport::default();
-        let budget = self.budget_for(gray.cols(), gray.rows());
         self.orb.set_max_features(
             budget
                 .saturating_mul(self.candidate_factor)
@@ -175,7 +303,7 @@ impl OrbExtractor {
         let mut keypoints = cv::Vector::<cv::KeyPoint>::new();
         for (i, &threshold) in self.fast_thresholds.iter().enumerate() {
             self.orb.set_fast_threshold(threshold)?;
-            self.orb.detect_def(gray, &mut keypoints)?;
+            self.orb.detect(gray, &mut keypoints, mask)?;
             let last = i + 1 == self.fast_thresholds.len();
             if keypoints.len() >= budget || last {
                 break;
@@ -213,13 +341,7 @@ impl OrbExtractor {
                 opencv::Error::new(cv::StsBadSize, "ORB descriptor is not 32 bytes")
             })?);
         }
-        let features = Features::new(
-            points.to_vec(),
-            packed,
-            gray.cols().max(0) as u32,
-            gray.rows().max(0) as u32,
-        );
-        Ok((features, report))
+        Ok((points, packed, report))
     }
 }
 

@@ -106,6 +106,9 @@ pub struct ChainCounts {
     pub fast_threshold_lowered: u64,
     /// Keypoints dropped because the lens model could not undistort them.
     pub keypoints_outside_lens: u64,
+    /// Frames whose ORB features were found on their straight-down view (a tilted or
+    /// gimballed camera, `rectify.rs`).
+    pub rectified_frames: u64,
     /// Current frames whose detection could not be undistorted.
     pub detections_outside_lens: u64,
     /// Past-image sides whose homography was carried by tracking (no ORB, no fit).
@@ -125,6 +128,7 @@ impl std::ops::AddAssign for ChainCounts {
         self.retry_rescued += c.retry_rescued;
         self.fast_threshold_lowered += c.fast_threshold_lowered;
         self.keypoints_outside_lens += c.keypoints_outside_lens;
+        self.rectified_frames += c.rectified_frames;
         self.detections_outside_lens += c.detections_outside_lens;
         self.chained_sides += c.chained_sides;
         self.refreshes += c.refreshes;
@@ -139,7 +143,18 @@ pub fn extract_undistorted(
     orb: &mut OrbExtractor,
     frame: &FrameInput,
 ) -> Result<(Features, ChainCounts), ChainError> {
-    let (mut features, report) = orb.extract_reported(frame.image)?;
+    // A tilted or gimballed camera's frame: ORB on its straight-down view.
+    let view = crate::rectify::rectification(
+        &frame.intrinsics,
+        frame.pose.attitude(),
+        frame.width,
+        frame.height,
+        orb.rectify_above_tilt_deg,
+    );
+    let (mut features, report) = match &view {
+        Some(view) => orb.extract_rectified(frame.image, view)?,
+        None => orb.extract_reported(frame.image)?,
+    };
     let dropped = features.undistort(
         &frame.intrinsics,
         &frame.distortion,
@@ -149,6 +164,7 @@ pub fn extract_undistorted(
     let counts = ChainCounts {
         fast_threshold_lowered: (report.threshold_lowered > 0) as u64,
         keypoints_outside_lens: dropped as u64,
+        rectified_frames: view.is_some() as u64,
         ..ChainCounts::default()
     };
     Ok((features, counts))

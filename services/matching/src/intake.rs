@@ -349,6 +349,7 @@ impl Intake {
             ("retry_rescued", c.retry_rescued),
             ("fast_threshold_lowered", c.fast_threshold_lowered),
             ("keypoints_outside_lens", c.keypoints_outside_lens),
+            ("rectified_frames", c.rectified_frames),
             ("detections_outside_lens", c.detections_outside_lens),
             ("chained_sides", c.chained_sides),
             ("refreshes", c.refreshes),

@@ -20,6 +20,7 @@ pub mod grid;
 pub mod ground_plane;
 pub mod hamming;
 pub mod intake;
+pub mod rectify;
 pub mod ring;
 pub mod ring_snapshot;
 pub mod ring_store;

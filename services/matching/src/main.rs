@@ -32,7 +32,8 @@
 //! (past images whose F came from the 5-point E because the dominant plane was not
 //! level), and the adaptations of
 //! [`matching::ChainCounts`]: `retried_looser_ratio`, `retry_rescued`,
-//! `fast_threshold_lowered`, `keypoints_outside_lens`, `detections_outside_lens`;
+//! `fast_threshold_lowered`, `keypoints_outside_lens`, `detections_outside_lens`,
+//! `rectified_frames` (ORB on a tilted camera's straight-down view, `matching::rectify`);
 //! `keyframes_restored`, `checkpoint_refused`, `checkpoint_failed`; `bad_frames`,
 //! `bad_detections` and `match_failed` (untrusted input dropped: a pair is lost, the
 //! service goes on). The pairing and matching logic is [`matching::intake`]; this

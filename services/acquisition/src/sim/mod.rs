@@ -8,6 +8,7 @@
 pub mod city;
 pub mod degrade;
 pub mod faults;
+pub mod gimbal;
 pub mod lens;
 pub mod motion;
 pub mod record;

@@ -1,5 +1,5 @@
-//! Rendering a scenario into a recording (format v1; v2 with a tilted camera) or a
-//! flight (videos + tlogs; nadir cameras only), with truth.
+//! Rendering a scenario into a recording (format v1; v2 with a tilted or gimballed
+//! camera) or a flight (videos + tlogs; nadir cameras only), with truth.
 
 use super::simulator::{SimStep, Simulator};
 use super::SimError;
@@ -51,15 +51,25 @@ impl PairSink for RecordingWriter {
                 pose: frame.body_true,
                 target: frame.target,
                 target_px: frame.target_px,
-                gimbal: None,
+                gimbal: frame.gimbal.map(|g| g.true_deg),
             };
-            self.write_encoded_frame(
-                frame.uav,
-                frame.t_s,
-                frame.body_measured,
-                &png,
-                Some(&truth),
-            )?;
+            match frame.gimbal {
+                Some(g) => self.write_gimbal_frame(
+                    frame.uav,
+                    frame.t_s,
+                    frame.body_measured,
+                    g.measured_deg,
+                    &png,
+                    Some(&truth),
+                )?,
+                None => self.write_encoded_frame(
+                    frame.uav,
+                    frame.t_s,
+                    frame.body_measured,
+                    &png,
+                    Some(&truth),
+                )?,
+            };
         }
         Ok(())
     }
@@ -115,7 +125,11 @@ pub fn record(
 ) -> Result<RecordSummary, SimError> {
     let config = sim.config().clone();
     let mut meta = RecordingMeta::new(name, config.frame_rate_hz, camera_of(sim), config.origin);
-    if let Some([yaw_deg, pitch_deg, roll_deg]) = config.camera.mount_angles_deg {
+    if config.camera.gimbal.is_some() {
+        for uav in [Uav::Left, Uav::Right] {
+            meta.set_gimbal_mount(uav);
+        }
+    } else if let Some([yaw_deg, pitch_deg, roll_deg]) = config.camera.mount_angles_deg {
         for uav in [Uav::Left, Uav::Right] {
             let angles = MountAngles {
                 yaw_deg,

@@ -98,6 +98,36 @@ pub struct SimCamera {
     /// vehicle, and recordings are written as version 2.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub mount_angles_deg: Option<[f64; 3]>,
+    /// A tracking gimbal (recording format v2, `mount = "gimbal"`): the camera turns
+    /// toward the vehicle every frame; `mount_angles_deg` is then its nominal pointing,
+    /// which places the UAVs. None: the mount is fixed.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub gimbal: Option<TrackingGimbal>,
+}
+
+/// A gimbal that keeps the vehicle near the image centre (`[camera] gimbal`).
+///
+/// Each frame its yaw and pitch (roll stays 0) move toward the angles that put the
+/// target point on the optical axis, through a first-order lag of time constant
+/// `tau_s`: a real tracking loop trails a turning vehicle, so the target sits near the
+/// centre, not on it. The angles it reports (telemetry.csv) are the true ones plus
+/// Gaussian encoder noise of `encoder_noise_deg` on each of the three; truth.csv has the
+/// true ones. The body's attitude errors and yaw bias are the AHRS's, as for any mount.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TrackingGimbal {
+    #[serde(default = "default_gimbal_tau_s")]
+    pub tau_s: f64,
+    #[serde(default = "default_encoder_noise_deg")]
+    pub encoder_noise_deg: f64,
+}
+
+fn default_gimbal_tau_s() -> f64 {
+    0.3
+}
+
+fn default_encoder_noise_deg() -> f64 {
+    0.2
 }
 
 impl SimCamera {
@@ -147,6 +177,21 @@ impl SimConfig {
                 return bad(format!(
                     "camera mount_angles_deg {:?} must point the camera within 60° of straight down",
                     c.mount_angles_deg
+                ));
+            }
+        }
+        if let Some(g) = c.gimbal {
+            if c.mount_angles_deg.is_none() {
+                return bad(
+                    "camera gimbal needs mount_angles_deg: its nominal pointing, which places the UAVs"
+                        .into(),
+                );
+            }
+            let ok = |v: f64| v.is_finite() && (0.0..=10.0).contains(&v);
+            if !ok(g.tau_s) || !ok(g.encoder_noise_deg) {
+                return bad(format!(
+                    "camera gimbal tau_s {} and encoder_noise_deg {} must be within [0, 10]",
+                    g.tau_s, g.encoder_noise_deg
                 ));
             }
         }

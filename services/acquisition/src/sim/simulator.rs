@@ -2,6 +2,7 @@
 //! UAV's view into a caller's buffer.
 
 use super::city::City;
+use super::gimbal::GimbalTrack;
 use super::lens::LensMap;
 use super::motion::{Motion, Route, TrueState};
 use super::render::{CameraView, Renderer, Surface, TrafficBox, VehicleBox, VEHICLE_TOP_BGR};
@@ -12,7 +13,7 @@ use opencv::prelude::*;
 use rand::rngs::StdRng;
 use rand::SeedableRng;
 use rand_distr::Distribution;
-use shared_types::conventions::{camera_to_world, wrap_angle, Attitude, Intrinsics, Uav};
+use shared_types::conventions::{camera_to_world, wrap_angle, Attitude, Intrinsics, Mount, Uav};
 use shared_types::lens::Distortion;
 use shared_types::messages::PoseSample;
 use shared_types::nav_noise::NavErrorState;
@@ -41,6 +42,16 @@ pub struct SimFrame {
     pub target: [f64; 3],
     /// Its exact projection, when inside the image.
     pub target_px: Option<[f64; 2]>,
+    /// A tracking gimbal's angles at this frame (`[camera] gimbal`): true, and as its
+    /// encoders report them, degrees (yaw, pitch, roll).
+    pub gimbal: Option<GimbalAngles>,
+}
+
+/// A gimbal's angles in one frame, degrees (yaw, pitch, roll of G relative to the body).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct GimbalAngles {
+    pub true_deg: [f64; 3],
+    pub measured_deg: [f64; 3],
 }
 
 /// Both UAVs' frames at one instant, and the vehicle they see.
@@ -60,6 +71,8 @@ pub struct Simulator {
     rng: StdRng,
     /// Each UAV's navigation errors (white or correlated over time).
     nav_errors: [NavErrorState; 2],
+    /// Each UAV's tracking gimbal, when the camera has one.
+    gimbals: [GimbalTrack; 2],
     intrinsics: Intrinsics,
     seq: u64,
     renderers: [Renderer; 2],
@@ -119,6 +132,7 @@ impl Simulator {
             intrinsics: Intrinsics::from_hfov(c.width, c.height, c.hfov_deg),
             rng: StdRng::seed_from_u64(config.seed),
             nav_errors: [NavErrorState::default(); 2],
+            gimbals: [GimbalTrack::default(); 2],
             city,
             motion,
             seq: 0,
@@ -207,8 +221,13 @@ impl Simulator {
         let i = uav.index();
         let [x, y, z] = state.uav_position[i];
         let [yaw, pitch, roll] = state.uav_attitude[i];
-        let mount = self.config.camera.mount();
         let body = Attitude::new(yaw, pitch, roll);
+        let dt = 1.0 / self.config.frame_rate_hz;
+        let camera = self.config.camera;
+        let gimbal_true = camera
+            .gimbal
+            .map(|g| self.gimbals[i].step(&g, body, Point3::new(x, y, z), target, dt));
+        let mount = gimbal_true.or(camera.mount());
         let attitude = mount.map_or(body, |m| m.equivalent_nadir_attitude(body));
         let view = CameraView {
             position: Point3::new(x, y, z),
@@ -221,6 +240,30 @@ impl Simulator {
         let noise = self.nav_errors[i].next(&self.config.noise, state.t_s, || {
             rand_distr::StandardNormal.sample(rng)
         });
+        // The encoders' noise is drawn after the navigation noise, and only with a
+        // gimbal: every other scenario draws what it always drew.
+        let gimbal = match (camera.gimbal, gimbal_true) {
+            (Some(spec), Some(m)) => {
+                let true_deg = [m.0.yaw, m.0.pitch, m.0.roll].map(f64::to_degrees);
+                let mut noisy = |a: f64| {
+                    let n: f64 = rand_distr::StandardNormal.sample(&mut self.rng);
+                    a + spec.encoder_noise_deg * n
+                };
+                let measured_deg = [noisy(true_deg[0]), noisy(true_deg[1]), noisy(true_deg[2])];
+                Some(GimbalAngles {
+                    true_deg,
+                    measured_deg,
+                })
+            }
+            _ => None,
+        };
+        let measured_mount = match gimbal {
+            Some(g) => {
+                let [y, p, r] = g.measured_deg;
+                Some(Mount::from_degrees(y, p, r))
+            }
+            None => mount,
+        };
         let bias = self.config.bias.at(state.t_s)[i];
         let body_true = pose(x, y, z, body);
         let body_measured = pose(
@@ -233,10 +276,8 @@ impl Simulator {
                 roll + noise[5].to_radians(),
             ),
         );
-        let (true_pose, measured) = match mount {
-            None => (body_true, body_measured),
-            Some(m) => (body_true.on_mount(m), body_measured.on_mount(m)),
-        };
+        let true_pose = mount.map_or(body_true, |m| body_true.on_mount(m));
+        let measured = measured_mount.map_or(body_measured, |m| body_measured.on_mount(m));
         let (w, h) = (view.width as f64, view.height as f64);
         let lens = self.distortion();
         let target_px = view
@@ -254,6 +295,7 @@ impl Simulator {
             body_measured,
             target: [target.x, target.y, target.z],
             target_px,
+            gimbal,
         }
     }
 
