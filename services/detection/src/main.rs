@@ -17,12 +17,17 @@
 //! `gated_frames` (frames detected with a gate), `frames_late` (started after the
 //! frame's deadline, one frame period after its moment: `shared_types::deadline`) and
 //! `frames_shed` (late with a newer frame of the same UAV waiting: skipped, no message).
+//! With `[detection] kind = "yolo"` (`detection::learned`): `model_runs`,
+//! `model_found`, `tracked`, `track_lost`, and the histogram `model` (µs per model run,
+//! on its own thread).
 
 use anyhow::{Context, Result};
 use clap::Parser;
+use detection::config::{DetectionConfig, DetectorKind};
 use detection::frame_view::frame_mat;
+use detection::learned::LearnedDetector;
 use detection::prediction_gate::{gate_for, FrameGeometry, RecentPredictions, TargetPrediction};
-use detection::{ColourBlobConfig, TrackedDetector};
+use detection::TrackedDetector;
 use shared_types::clock::{elapsed_us, monotonic_ns};
 use shared_types::conventions::Intrinsics;
 use shared_types::conventions::Uav;
@@ -56,10 +61,10 @@ fn run() -> Result<()> {
     init_tracing("detection");
     apply_realtime(args.service.config.as_deref(), "detection")
         .map_err(|e| Permanent::new("[realtime]", e))?;
-    let config: ColourBlobConfig = load_section(args.service.config.as_deref(), "detection")?;
-    let gate_config = config.gate;
-    let detector =
-        TrackedDetector::new(config).map_err(|e| Permanent::new("[detection] configuration", e))?;
+    let config: DetectionConfig = load_section(args.service.config.as_deref(), "detection")?;
+    let gate_config = config.colour.gate;
+    let detector = Chosen::new(config, args.service.flow_controlled)
+        .map_err(|e| Permanent::new("[detection] configuration", e))?;
     let endpoint = Endpoint::new(&args.service.run_id, "detection")?;
     let frames = [
         endpoint.frame_subscriber(Uav::Left)?,
@@ -127,9 +132,26 @@ fn run() -> Result<()> {
     Ok(())
 }
 
+/// The detector `[detection] kind` chose.
+enum Chosen {
+    Colour(TrackedDetector),
+    Learned(Box<LearnedDetector>),
+}
+
+impl Chosen {
+    fn new(config: DetectionConfig, flow_controlled: bool) -> Result<Self, detection::DetectError> {
+        Ok(match (config.kind, config.yolo) {
+            (DetectorKind::Yolo, Some(yolo)) => {
+                Chosen::Learned(Box::new(LearnedDetector::new(yolo, flow_controlled)?))
+            }
+            _ => Chosen::Colour(TrackedDetector::new(config.colour)?),
+        })
+    }
+}
+
 /// The service's state between wake-ups.
 struct Detecting {
-    detector: TrackedDetector,
+    detector: Chosen,
     predictions: RecentPredictions,
     gate_config: detection::prediction_gate::GateConfig,
     stats: StageStats,
@@ -167,20 +189,23 @@ impl Detecting {
             Verdict::OnTime => {}
         }
         let stats = &mut self.stats;
-        let found = match frame_mat(&header, payload) {
-            Ok(mat) => match self.detector.detect_gated(
+        let detected = frame_mat(&header, payload).map(|mat| match &mut self.detector {
+            Chosen::Colour(d) => d.detect_gated(
                 uav,
                 header.t_s,
                 &mat,
                 gate_of(&self.predictions, &header, &self.gate_config, stats),
-            ) {
-                Ok(d) => d,
-                Err(e) => {
-                    tracing::warn!(seq = header.seq, uav, "detector failed: {e}");
-                    stats.count("bad_frames", 1);
-                    None
-                }
-            },
+            ),
+            // The learned detector is not gated by the filter's prediction yet.
+            Chosen::Learned(d) => d.detect(uav, &mat),
+        });
+        let found = match detected {
+            Ok(Ok(d)) => d,
+            Ok(Err(e)) => {
+                tracing::warn!(seq = header.seq, uav, "detector failed: {e}");
+                stats.count("bad_frames", 1);
+                None
+            }
             Err(e) => {
                 tracing::warn!(seq = header.seq, uav, "frame rejected: {e}");
                 stats.count("bad_frames", 1);
@@ -194,13 +219,27 @@ impl Detecting {
             uav: header.uav,
             ..Default::default()
         };
-        let counts = self.detector.take_counts();
-        stats.count("exposure_retries", counts.exposure_retries);
-        stats.count("partial_view_dropped", counts.partial_view_dropped);
-        stats.count("window_looks", counts.window_looks);
-        stats.count("window_misses", counts.window_misses);
-        stats.count("gated_out", counts.gated_out);
-        stats.count("reacquired", counts.reacquired);
+        match &mut self.detector {
+            Chosen::Colour(d) => {
+                let counts = d.take_counts();
+                stats.count("exposure_retries", counts.exposure_retries);
+                stats.count("partial_view_dropped", counts.partial_view_dropped);
+                stats.count("window_looks", counts.window_looks);
+                stats.count("window_misses", counts.window_misses);
+                stats.count("gated_out", counts.gated_out);
+                stats.count("reacquired", counts.reacquired);
+            }
+            Chosen::Learned(d) => {
+                let counts = d.take_counts();
+                stats.count("model_runs", counts.model_runs);
+                stats.count("model_found", counts.model_found);
+                stats.count("tracked", counts.tracked);
+                stats.count("track_lost", counts.track_lost);
+                if counts.model_runs > 0 {
+                    stats.record("model", counts.model_us / counts.model_runs);
+                }
+            }
+        }
         if let Some(d) = found {
             stats.count("found", 1);
             msg.found = 1;

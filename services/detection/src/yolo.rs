@@ -1,4 +1,5 @@
-//! YOLO through OpenCV DNN, from a user-supplied ONNX file (no model ships with dualgeo).
+//! YOLO through OpenCV DNN: an ONNX file (YOLOv5/v8 exports), or a Darknet model
+//! (`.cfg` + `.weights`, e.g. the YOLOv2-tiny COCO model `scripts/setup.sh` installs).
 //!
 //! Pre-processing: letterbox to the model's square input (aspect kept, grey 114
 //! padding, centred), BGR→RGB, scale 1/255. Outputs:
@@ -6,6 +7,13 @@
 //!   score = objectness × best class score.
 //! * **YOLOv8** `(1, 4 + classes, N)`: cx, cy, w, h, class scores; score = best class
 //!   score.
+//! * **Darknet** (OpenCV's region layer) `(N, 5 + classes)`: cx, cy, w, h as fractions
+//!   of the input, objectness, class scores already multiplied by the objectness;
+//!   score = best class score.
+//!
+//! Classes to keep are given by index or, with a names file (one class per line, as
+//! Darknet's `coco.names`), by name; a name the file does not have is an error when the
+//! detector is built, before the run.
 //!
 //! Boxes are in input pixels with 0 at the image's left/top *edge* (YOLO's convention).
 //! They map back to frame pixels through the letterbox, then shift by −0.5 to OpenCV's
@@ -26,13 +34,28 @@ pub enum YoloLayout {
     Auto,
     V5,
     V8,
+    Darknet,
+}
+
+/// A class to keep: its index in the model's output, or its name in `names`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(untagged)]
+pub enum ClassRef {
+    Index(usize),
+    Name(String),
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct YoloConfig {
-    /// The ONNX file.
+    /// The ONNX file, or the Darknet `.weights` with `config`.
     pub model: PathBuf,
+    /// A Darknet model's `.cfg` (the model is then read as Darknet).
+    #[serde(default)]
+    pub config: Option<PathBuf>,
+    /// The class names, one per line (Darknet's `coco.names`): lets `classes` name them.
+    #[serde(default)]
+    pub names: Option<PathBuf>,
     /// The model's square input size, pixels.
     #[serde(default = "default_input")]
     pub input_size: i32,
@@ -42,9 +65,70 @@ pub struct YoloConfig {
     pub confidence_threshold: f32,
     #[serde(default = "default_iou")]
     pub nms_iou: f32,
-    /// Class indices to keep; empty keeps every class.
+    /// Classes to keep, by index or by name (with `names`); empty keeps every class.
     #[serde(default)]
-    pub classes: Vec<usize>,
+    pub classes: Vec<ClassRef>,
+    /// In the detection service: each camera's frames go to the model at most every
+    /// this many frames, and a template tracker carries the target between
+    /// (`learned.rs`). A model of ~70 ms a frame cannot see every frame of two 30 FPS
+    /// cameras on two cores.
+    #[serde(default = "default_every_frames")]
+    pub every_frames: u32,
+}
+
+fn default_every_frames() -> u32 {
+    8
+}
+
+impl YoloConfig {
+    /// The class indices `classes` names, checked against the names file.
+    pub fn class_indices(&self) -> Result<Vec<usize>, DetectError> {
+        let names = match &self.names {
+            Some(path) => Some(read_names(path)?),
+            None => None,
+        };
+        self.classes
+            .iter()
+            .map(|c| match (c, &names) {
+                (ClassRef::Index(i), Some(n)) if *i >= n.len() => {
+                    Err(DetectError::Config(format!(
+                        "class {i} is beyond the {} classes of the names file",
+                        n.len()
+                    )))
+                }
+                (ClassRef::Index(i), _) => Ok(*i),
+                (ClassRef::Name(name), Some(n)) => {
+                    n.iter().position(|m| m == name).ok_or_else(|| {
+                        DetectError::Config(format!(
+                            "class {name:?} is not in {} ({} classes: {}, …)",
+                            self.names
+                                .as_ref()
+                                .map_or(String::new(), |p| p.display().to_string()),
+                            n.len(),
+                            n.iter().take(8).cloned().collect::<Vec<_>>().join(", ")
+                        ))
+                    })
+                }
+                (ClassRef::Name(name), None) => Err(DetectError::Config(format!(
+                    "class {name:?} is given by name: set `names` to the model's class names file"
+                ))),
+            })
+            .collect()
+    }
+}
+
+/// A names file: one class per line, blank lines at the end ignored.
+fn read_names(path: &std::path::Path) -> Result<Vec<String>, DetectError> {
+    let text = std::fs::read_to_string(path).map_err(|e| DetectError::Model {
+        path: path.display().to_string(),
+        reason: e.to_string(),
+    })?;
+    let names: Vec<String> = text.lines().map(|l| l.trim().to_string()).collect();
+    let end = names
+        .iter()
+        .rposition(|n| !n.is_empty())
+        .map_or(0, |i| i + 1);
+    Ok(names[..end].to_vec())
 }
 
 fn default_input() -> i32 {
@@ -109,13 +193,15 @@ impl Letterbox {
 }
 
 /// Decodes a raw output tensor of shape `dims` (batch 1) into candidates above
-/// `threshold` whose class is in `classes` (all when empty).
+/// `threshold` whose class is in `classes` (all when empty), in input pixels of a
+/// `input_size` square input.
 pub fn decode(
     data: &[f32],
     dims: [usize; 3],
     layout: YoloLayout,
     threshold: f32,
     classes: &[usize],
+    input_size: f32,
 ) -> Result<Vec<Candidate>, DetectError> {
     let [batch, a, b] = dims;
     if batch != 1 || data.len() != a * b {
@@ -129,7 +215,7 @@ pub fn decode(
         YoloLayout::Auto => YoloLayout::V8,
         l => l,
     };
-    let row_major = layout == YoloLayout::V5;
+    let row_major = layout != YoloLayout::V8;
     let (count, width) = if row_major { (a, b) } else { (b, a) };
     // Value k of candidate i.
     let value = |i: usize, k: usize| {
@@ -139,7 +225,7 @@ pub fn decode(
             data[k * b + i]
         }
     };
-    let first_class = if layout == YoloLayout::V5 { 5 } else { 4 };
+    let first_class = if layout == YoloLayout::V8 { 4 } else { 5 };
     if width <= first_class {
         return Err(DetectError::Config(format!(
             "YOLO output of shape {dims:?} has no class scores for layout {layout:?}"
@@ -162,11 +248,17 @@ pub fn decode(
         {
             continue;
         }
+        // Darknet's boxes are fractions of the input.
+        let unit = if layout == YoloLayout::Darknet {
+            input_size
+        } else {
+            1.0
+        };
         let c = Candidate {
-            cx: value(i, 0),
-            cy: value(i, 1),
-            w: value(i, 2),
-            h: value(i, 3),
+            cx: value(i, 0) * unit,
+            cy: value(i, 1) * unit,
+            w: value(i, 2) * unit,
+            h: value(i, 3) * unit,
             score,
             class,
         };
@@ -175,6 +267,16 @@ pub fn decode(
         }
     }
     Ok(out)
+}
+
+/// The number of classes an output of shape `dims` holds under `layout`.
+fn class_count(dims: [usize; 3], layout: YoloLayout) -> usize {
+    let [_, a, b] = dims;
+    match layout {
+        YoloLayout::V8 => a.saturating_sub(4),
+        YoloLayout::Auto if a <= b => a.saturating_sub(4),
+        _ => b.saturating_sub(5),
+    }
 }
 
 /// Non-maximum suppression (OpenCV `NMSBoxes`); survivors, most confident first.
@@ -204,6 +306,8 @@ pub fn suppress(
 
 pub struct YoloDetector {
     config: YoloConfig,
+    /// `config.classes` as indices.
+    classes: Vec<usize>,
     net: opencv::dnn::Net,
     padded: cv::Mat,
     resized: cv::Mat,
@@ -222,23 +326,64 @@ impl YoloDetector {
         if config.input_size < 32
             || !(0.0..=1.0).contains(&config.confidence_threshold)
             || !(0.0..=1.0).contains(&config.nms_iou)
+            || config.every_frames == 0
         {
             return Err(DetectError::Config(
-                "need input_size >= 32 and thresholds in [0, 1]".into(),
+                "need input_size >= 32, thresholds in [0, 1] and every_frames >= 1".into(),
             ));
         }
-        let mut net = opencv::dnn::read_net_from_onnx(&path).map_err(|e| model_err(e.message))?;
+        let classes = config.class_indices()?;
+        let mut net = match &config.config {
+            Some(cfg) => {
+                if !cfg.is_file() {
+                    return Err(DetectError::Model {
+                        path: cfg.display().to_string(),
+                        reason: "no such file".into(),
+                    });
+                }
+                opencv::dnn::read_net_from_darknet(&cfg.display().to_string(), &path)
+            }
+            None => opencv::dnn::read_net_from_onnx(&path),
+        }
+        .map_err(|e| model_err(e.message))?;
         if net.empty().map_err(|e| model_err(e.message))? {
             return Err(model_err("OpenCV read an empty network".into()));
         }
         net.set_preferable_backend(opencv::dnn::DNN_BACKEND_OPENCV)?;
         net.set_preferable_target(opencv::dnn::DNN_TARGET_CPU)?;
-        Ok(Self {
+        let mut config = config;
+        if config.config.is_some() && config.layout == YoloLayout::Auto {
+            config.layout = YoloLayout::Darknet;
+        }
+        let mut detector = Self {
             config,
+            classes,
             net,
             padded: cv::Mat::default(),
             resized: cv::Mat::default(),
-        })
+        };
+        // One forward on a blank frame: a model whose output cannot be decoded is an
+        // error now, before the run, not at the first frame.
+        let size = detector.config.input_size;
+        let blank =
+            cv::Mat::new_rows_cols_with_default(size, size, cv::CV_8UC3, cv::Scalar::all(0.0))?;
+        let (data, dims, _) = detector
+            .forward(&blank)
+            .map_err(|e| model_err(e.to_string()))?;
+        let c = &detector.config;
+        decode(&data, dims, c.layout, 2.0, &[], size as f32)
+            .map_err(|e| model_err(e.to_string()))?;
+        if let Some(&beyond) = detector
+            .classes
+            .iter()
+            .find(|&&i| i >= class_count(dims, c.layout))
+        {
+            return Err(model_err(format!(
+                "class {beyond} is beyond the model's {} classes",
+                class_count(dims, c.layout)
+            )));
+        }
+        Ok(detector)
     }
 
     /// The raw output tensor for `frame`, with the letterbox used.
@@ -246,6 +391,15 @@ impl YoloDetector {
         &mut self,
         frame: &cv::Mat,
     ) -> Result<(Vec<f32>, [usize; 3], Letterbox), DetectError> {
+        let (blob, lb) = self.blob(frame)?;
+        let (data, dims) = self.run(&blob)?;
+        Ok((data, dims, lb))
+    }
+
+    /// The model's input for `frame` (letterboxed, RGB, scaled): the one copy of the
+    /// frame's pixels the network needs; with the letterbox used.
+    pub fn blob(&mut self, frame: &cv::Mat) -> Result<(cv::Mat, Letterbox), DetectError> {
+        check_bgr(frame)?;
         let size = self.config.input_size;
         let (lb, resized) = Letterbox::new(frame.cols(), frame.rows(), size);
         opencv::imgproc::resize(
@@ -276,7 +430,12 @@ impl YoloDetector {
             false,
             cv::CV_32F,
         )?;
-        self.net.set_input_def(&blob)?;
+        Ok((blob, lb))
+    }
+
+    /// The network on a blob from [`Self::blob`]: the raw output and its shape.
+    fn run(&mut self, blob: &cv::Mat) -> Result<(Vec<f32>, [usize; 3]), DetectError> {
+        self.net.set_input_def(blob)?;
         let out = self.net.forward_single_def()?;
         let shape: Vec<usize> = out.mat_size().iter().map(|d| *d as usize).collect();
         let dims = match shape[..] {
@@ -289,16 +448,34 @@ impl YoloDetector {
             }
         };
         let data = out.data_typed::<f32>()?.to_vec();
-        Ok((data, dims, lb))
+        Ok((data, dims))
     }
-}
 
-impl Detector for YoloDetector {
-    fn detect(&mut self, frame: &cv::Mat) -> Result<Option<Detection>, DetectError> {
-        check_bgr(frame)?;
-        let (data, dims, lb) = self.forward(frame)?;
+    /// The most confident box in a blob's output, in the frame's pixels.
+    pub fn detect_blob(
+        &mut self,
+        blob: &cv::Mat,
+        lb: &Letterbox,
+    ) -> Result<Option<Detection>, DetectError> {
+        let (data, dims) = self.run(blob)?;
+        self.best(&data, dims, lb)
+    }
+
+    fn best(
+        &self,
+        data: &[f32],
+        dims: [usize; 3],
+        lb: &Letterbox,
+    ) -> Result<Option<Detection>, DetectError> {
         let c = &self.config;
-        let candidates = decode(&data, dims, c.layout, c.confidence_threshold, &c.classes)?;
+        let candidates = decode(
+            data,
+            dims,
+            c.layout,
+            c.confidence_threshold,
+            &self.classes,
+            c.input_size as f32,
+        )?;
         let Some(best) = suppress(&candidates, c.confidence_threshold, c.nms_iou)?
             .into_iter()
             .next()
@@ -319,6 +496,18 @@ impl Detector for YoloDetector {
             confidence: best.score.clamp(0.0, 1.0),
         }))
     }
+
+    /// `[detection.yolo] every_frames`.
+    pub fn every_frames(&self) -> u32 {
+        self.config.every_frames
+    }
+}
+
+impl Detector for YoloDetector {
+    fn detect(&mut self, frame: &cv::Mat) -> Result<Option<Detection>, DetectError> {
+        let (data, dims, lb) = self.forward(frame)?;
+        self.best(&data, dims, &lb)
+    }
 }
 
 #[cfg(test)]
@@ -336,13 +525,13 @@ mod tests {
             0.9, 0.1, // class 0
             0.05, 0.7, // class 1
         ];
-        let got = decode(&v8, [1, 6, 2], YoloLayout::V8, 0.5, &[]).unwrap();
+        let got = decode(&v8, [1, 6, 2], YoloLayout::V8, 0.5, &[], 1.0).unwrap();
         assert_eq!(got.len(), 2);
         assert_eq!((got[0].cx, got[0].class, got[0].score), (10.0, 0, 0.9));
         assert_eq!((got[1].cy, got[1].class, got[1].score), (60.0, 1, 0.7));
         // Class filter.
         assert_eq!(
-            decode(&v8, [1, 6, 2], YoloLayout::V8, 0.5, &[1])
+            decode(&v8, [1, 6, 2], YoloLayout::V8, 0.5, &[1], 1.0)
                 .unwrap()
                 .len(),
             1
@@ -353,10 +542,10 @@ mod tests {
             50.0, 60.0, 8.0, 2.0, 1.0, 0.1, 0.7, //
             30.0, 30.0, 5.0, 5.0, 0.2, 0.9, 0.0, // low objectness: 0.18
         ];
-        let got5 = decode(&v5, [1, 3, 7], YoloLayout::V5, 0.5, &[]).unwrap();
+        let got5 = decode(&v5, [1, 3, 7], YoloLayout::V5, 0.5, &[], 1.0).unwrap();
         assert_eq!(got5, got);
         assert!(
-            decode(&v5, [1, 4, 7], YoloLayout::V5, 0.5, &[]).is_err(),
+            decode(&v5, [1, 4, 7], YoloLayout::V5, 0.5, &[], 1.0).is_err(),
             "shape must match data"
         );
     }
@@ -369,14 +558,14 @@ mod tests {
         let mut v8 = vec![1.0f32; 6 * n];
         (0..n).for_each(|i| v8[4 * n + i] = if i == 7 { 0.8 } else { 0.0 });
         (0..n).for_each(|i| v8[5 * n + i] = 0.0);
-        let got = decode(&v8, [1, 6, n], YoloLayout::Auto, 0.5, &[]).unwrap();
+        let got = decode(&v8, [1, 6, n], YoloLayout::Auto, 0.5, &[], 1.0).unwrap();
         assert_eq!((got.len(), got[0].score), (1, 0.8));
         let mut v5 = vec![1.0f32; n * 7];
         (0..n).for_each(|i| {
             v5[i * 7 + 5] = if i == 3 { 0.6 } else { 0.0 };
             v5[i * 7 + 6] = 0.0;
         });
-        let got = decode(&v5, [1, n, 7], YoloLayout::Auto, 0.5, &[]).unwrap();
+        let got = decode(&v5, [1, n, 7], YoloLayout::Auto, 0.5, &[], 1.0).unwrap();
         assert_eq!((got.len(), got[0].score), (1, 0.6));
     }
 
@@ -412,10 +601,13 @@ mod tests {
         let cfg = YoloConfig {
             model: "/nonexistent/yolo.onnx".into(),
             input_size: 640,
+            config: None,
+            names: None,
             layout: YoloLayout::Auto,
             confidence_threshold: 0.25,
             nms_iou: 0.45,
             classes: vec![],
+            every_frames: 8,
         };
         let e = YoloDetector::new(cfg).err().unwrap().to_string();
         assert!(

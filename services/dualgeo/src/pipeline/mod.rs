@@ -99,7 +99,13 @@ fn check_config(path: &Path) -> Result<()> {
     load_section::<geolocation::EstimatorConfig>(Some(path), "estimator")?
         .validate()
         .context("[estimator]")?;
-    load_section::<detection::ColourBlobConfig>(Some(path), "detection")?;
+    let detection = load_section::<detection::config::DetectionConfig>(Some(path), "detection")?;
+    // A learned detector's model is loaded here once: a missing file, a model OpenCV
+    // cannot read, an output it cannot decode or a class the names file lacks is an
+    // error before any process starts.
+    if let (detection::config::DetectorKind::Yolo, Some(yolo)) = (detection.kind, detection.yolo) {
+        detection::yolo::YoloDetector::new(yolo).context("[detection.yolo]")?;
+    }
     load_section::<shared_types::realtime::RealtimeConfig>(Some(path), "realtime")?.validate()?;
     let text = std::fs::read_to_string(path)?;
     let table: toml::Table = toml::from_str(&text)?;

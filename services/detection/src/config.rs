@@ -1,0 +1,117 @@
+//! `[detection]`: which detector the service runs, and its settings.
+//!
+//! ```toml
+//! [detection]
+//! kind = "yolo"            # "colour" (default) or "yolo"
+//! saturation_min = 150     # the colour detector's keys stay at this level
+//!
+//! [detection.yolo]
+//! model = "data/models/yolov2-tiny/yolov2-tiny.weights"
+//! config = "data/models/yolov2-tiny/yolov2-tiny.cfg"
+//! names = "data/models/yolov2-tiny/coco.names"
+//! classes = ["car", "bus", "truck"]
+//! ```
+//!
+//! Unknown keys are refused at every level, as everywhere in the configuration.
+
+use crate::yolo::YoloConfig;
+use crate::ColourBlobConfig;
+use serde::{Deserialize, Serialize};
+
+/// The detector `[detection] kind` selects.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum DetectorKind {
+    /// The colour-blob detector with each camera's track (`tracked.rs`).
+    #[default]
+    Colour,
+    /// A YOLO model through OpenCV DNN, carried between its runs by a template tracker
+    /// (`learned.rs`).
+    Yolo,
+}
+
+/// The whole `[detection]` section.
+#[derive(Debug, Clone, PartialEq, Default, Deserialize)]
+#[serde(try_from = "toml::Table")]
+pub struct DetectionConfig {
+    pub kind: DetectorKind,
+    /// The colour detector's settings (the section's own keys).
+    pub colour: ColourBlobConfig,
+    /// `[detection.yolo]`, required with `kind = "yolo"`.
+    pub yolo: Option<YoloConfig>,
+}
+
+impl TryFrom<toml::Table> for DetectionConfig {
+    type Error = String;
+
+    fn try_from(mut table: toml::Table) -> Result<Self, String> {
+        let kind = match table.remove("kind") {
+            Some(v) => v
+                .try_into::<DetectorKind>()
+                .map_err(|e| format!("kind: {e} (expected \"colour\" or \"yolo\")"))?,
+            None => DetectorKind::default(),
+        };
+        let yolo = match table.remove("yolo") {
+            Some(v) => Some(
+                v.try_into::<YoloConfig>()
+                    .map_err(|e| format!("[detection.yolo]: {e}"))?,
+            ),
+            None => None,
+        };
+        if kind == DetectorKind::Yolo && yolo.is_none() {
+            return Err("kind = \"yolo\" needs a [detection.yolo] table with its model".into());
+        }
+        let colour = toml::Value::Table(table)
+            .try_into::<ColourBlobConfig>()
+            .map_err(|e| e.to_string())?;
+        Ok(Self { kind, colour, yolo })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn parse(text: &str) -> Result<DetectionConfig, String> {
+        shared_types::shell::parse_section(text, "detection")
+    }
+
+    #[test]
+    fn colour_is_the_default_and_its_keys_stay_at_the_top() {
+        let c = parse("[detection]\nsaturation_min = 120\n").unwrap();
+        assert_eq!(c.kind, DetectorKind::Colour);
+        assert_eq!(c.colour.saturation_min, 120);
+        assert!(c.yolo.is_none());
+        assert_eq!(parse("").unwrap(), DetectionConfig::default());
+    }
+
+    #[test]
+    fn yolo_takes_its_table_and_bad_keys_are_refused() {
+        let c = parse(
+            "[detection]\nkind = \"yolo\"\n[detection.yolo]\nmodel = \"m.weights\"\nconfig = \"m.cfg\"\nclasses = [\"car\", 7]\n",
+        )
+        .unwrap();
+        assert_eq!(c.kind, DetectorKind::Yolo);
+        let y = c.yolo.unwrap();
+        assert_eq!(y.config.as_deref(), Some(std::path::Path::new("m.cfg")));
+        assert_eq!(
+            y.classes,
+            vec![
+                crate::yolo::ClassRef::Name("car".into()),
+                crate::yolo::ClassRef::Index(7)
+            ]
+        );
+        for (bad, says) in [
+            ("[detection]\nkind = \"yolo\"\n", "needs a [detection.yolo]"),
+            ("[detection]\nkind = \"sonar\"\n", "kind"),
+            ("[detection]\nhue = 3\n", "hue"),
+            (
+                "[detection]\nkind = \"yolo\"\n[detection.yolo]\nmodel = \"m\"\nconfidence = 0.3\n",
+                "confidence",
+            ),
+        ] {
+            let e = parse(bad).unwrap_err();
+            assert!(e.contains(says), "{bad}: {e}");
+        }
+    }
+}
