@@ -151,7 +151,7 @@ fn main() -> Result<()> {
                 let t = Instant::now();
                 let found = colour.detect(camera, step.frames[camera].t_s, frame)?;
                 c_tally.see(truth, found, args.hit_px, t.elapsed().as_secs_f64() * 1e3);
-                if k % args.yolo_every == 0 {
+                if k.is_multiple_of(args.yolo_every.max(1)) {
                     let t = Instant::now();
                     let found = vehicles.detect(frame)?;
                     y_tally.see(truth, found, args.hit_px, t.elapsed().as_secs_f64() * 1e3);

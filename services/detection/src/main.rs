@@ -134,7 +134,7 @@ fn run() -> Result<()> {
 
 /// The detector `[detection] kind` chose.
 enum Chosen {
-    Colour(TrackedDetector),
+    Colour(Box<TrackedDetector>),
     Learned(Box<LearnedDetector>),
 }
 
@@ -144,7 +144,7 @@ impl Chosen {
             (DetectorKind::Yolo, Some(yolo)) => {
                 Chosen::Learned(Box::new(LearnedDetector::new(yolo, flow_controlled)?))
             }
-            _ => Chosen::Colour(TrackedDetector::new(config.colour)?),
+            _ => Chosen::Colour(Box::new(TrackedDetector::new(config.colour)?)),
         })
     }
 }
@@ -235,8 +235,8 @@ impl Detecting {
                 stats.count("model_found", counts.model_found);
                 stats.count("tracked", counts.tracked);
                 stats.count("track_lost", counts.track_lost);
-                if counts.model_runs > 0 {
-                    stats.record("model", counts.model_us / counts.model_runs);
+                if let Some(mean) = counts.model_us.checked_div(counts.model_runs) {
+                    stats.record("model", mean);
                 }
             }
         }

@@ -341,7 +341,10 @@ impl YoloDetector {
                         reason: "no such file".into(),
                     });
                 }
-                opencv::dnn::read_net_from_darknet(&cfg.display().to_string(), &path)
+                opencv::dnn::read_net_from_darknet(
+                    cfg.display().to_string().as_str(),
+                    path.as_str(),
+                )
             }
             None => opencv::dnn::read_net_from_onnx(&path),
         }

@@ -52,7 +52,7 @@ pub fn rectification(
     above_deg: f64,
 ) -> Option<Rectification> {
     let tilt = tilt_deg(attitude);
-    if !(tilt > above_deg) || tilt >= 80.0 {
+    if tilt.is_nan() || tilt <= above_deg || tilt >= 80.0 {
         return None;
     }
     // Camera vectors to the virtual camera's: both levelled frames share the yaw.
