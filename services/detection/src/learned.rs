@@ -17,7 +17,7 @@
 //! frame is newest when it is done.
 
 use crate::template_track::TemplateTrack;
-use crate::yolo::{Letterbox, YoloConfig, YoloDetector};
+use crate::yolo::{model_input, Letterbox, YoloConfig, YoloDetector};
 use crate::{DetectError, Detection};
 use crossbeam_channel::{bounded, Receiver, Sender};
 use opencv::core as cv;
@@ -56,8 +56,10 @@ struct Answer {
 }
 
 pub struct LearnedDetector {
-    /// The model on the calling thread's side: only its pre-processing is used here.
-    front: YoloDetector,
+    /// The model's square input size, and the pre-processing's buffers.
+    input_size: i32,
+    resized: cv::Mat,
+    padded: cv::Mat,
     jobs: Option<Sender<Job>>,
     answers: Receiver<Answer>,
     worker: Option<JoinHandle<()>>,
@@ -73,12 +75,11 @@ pub struct LearnedDetector {
 }
 
 impl LearnedDetector {
-    /// Loads the model twice (one for the worker, one for the pre-processing here);
-    /// `synchronous`: wait for each model run on the frame that started it.
+    /// Loads the model (for the worker thread); `synchronous`: wait for each model
+    /// run on the frame that started it.
     pub fn new(config: YoloConfig, synchronous: bool) -> Result<Self, DetectError> {
-        let front = YoloDetector::new(config.clone())?;
         let mut model = YoloDetector::new(config)?;
-        let every_frames = front.every_frames();
+        let (every_frames, input_size) = (model.config().every_frames, model.config().input_size);
         let (jobs, job_rx) = bounded::<Job>(1);
         let (answer_tx, answers) = bounded::<Answer>(2);
         let worker = std::thread::Builder::new()
@@ -100,7 +101,9 @@ impl LearnedDetector {
             })
             .map_err(|e| DetectError::Config(format!("start the model thread: {e}")))?;
         Ok(Self {
-            front,
+            input_size,
+            resized: cv::Mat::default(),
+            padded: cv::Mat::default(),
             jobs: Some(jobs),
             answers,
             worker: Some(worker),
@@ -147,7 +150,8 @@ impl LearnedDetector {
             || self.since_run[camera].saturating_add(1) >= self.every_frames;
         self.since_run[camera] = self.since_run[camera].saturating_add(1);
         if due && !self.in_flight {
-            let (blob, letterbox) = self.front.blob(frame)?;
+            let (blob, letterbox) =
+                model_input(frame, self.input_size, &mut self.resized, &mut self.padded)?;
             let job = Job {
                 camera,
                 blob,

@@ -269,6 +269,48 @@ pub fn decode(
     Ok(out)
 }
 
+/// The model's input for `frame` (letterboxed to `size` × `size`, RGB, scaled): the one
+/// copy of the frame's pixels the network needs; with the letterbox used. `resized` and
+/// `padded` are buffers kept between frames.
+pub fn model_input(
+    frame: &cv::Mat,
+    size: i32,
+    resized: &mut cv::Mat,
+    padded: &mut cv::Mat,
+) -> Result<(cv::Mat, Letterbox), DetectError> {
+    check_bgr(frame)?;
+    let (lb, inner) = Letterbox::new(frame.cols(), frame.rows(), size);
+    opencv::imgproc::resize(
+        frame,
+        resized,
+        inner,
+        0.0,
+        0.0,
+        opencv::imgproc::INTER_LINEAR,
+    )?;
+    let (left, top) = (lb.pad_x as i32, lb.pad_y as i32);
+    cv::copy_make_border(
+        &*resized,
+        padded,
+        top,
+        size - inner.height - top,
+        left,
+        size - inner.width - left,
+        cv::BORDER_CONSTANT,
+        cv::Scalar::all(114.0),
+    )?;
+    let blob = opencv::dnn::blob_from_image(
+        &*padded,
+        1.0 / 255.0,
+        cv::Size::new(size, size),
+        cv::Scalar::all(0.0),
+        true,
+        false,
+        cv::CV_32F,
+    )?;
+    Ok((blob, lb))
+}
+
 /// The number of classes an output of shape `dims` holds under `layout`.
 fn class_count(dims: [usize; 3], layout: YoloLayout) -> usize {
     let [_, a, b] = dims;
@@ -399,41 +441,14 @@ impl YoloDetector {
         Ok((data, dims, lb))
     }
 
-    /// The model's input for `frame` (letterboxed, RGB, scaled): the one copy of the
-    /// frame's pixels the network needs; with the letterbox used.
+    /// The model's input for `frame` ([`model_input`]), with the letterbox used.
     pub fn blob(&mut self, frame: &cv::Mat) -> Result<(cv::Mat, Letterbox), DetectError> {
-        check_bgr(frame)?;
-        let size = self.config.input_size;
-        let (lb, resized) = Letterbox::new(frame.cols(), frame.rows(), size);
-        opencv::imgproc::resize(
+        model_input(
             frame,
+            self.config.input_size,
             &mut self.resized,
-            resized,
-            0.0,
-            0.0,
-            opencv::imgproc::INTER_LINEAR,
-        )?;
-        let (left, top) = (lb.pad_x as i32, lb.pad_y as i32);
-        cv::copy_make_border(
-            &self.resized,
             &mut self.padded,
-            top,
-            size - resized.height - top,
-            left,
-            size - resized.width - left,
-            cv::BORDER_CONSTANT,
-            cv::Scalar::all(114.0),
-        )?;
-        let blob = opencv::dnn::blob_from_image(
-            &self.padded,
-            1.0 / 255.0,
-            cv::Size::new(size, size),
-            cv::Scalar::all(0.0),
-            true,
-            false,
-            cv::CV_32F,
-        )?;
-        Ok((blob, lb))
+        )
     }
 
     /// The network on a blob from [`Self::blob`]: the raw output and its shape.
@@ -500,9 +515,9 @@ impl YoloDetector {
         }))
     }
 
-    /// `[detection.yolo] every_frames`.
-    pub fn every_frames(&self) -> u32 {
-        self.config.every_frames
+    /// The configuration it was built with.
+    pub fn config(&self) -> &YoloConfig {
+        &self.config
     }
 }
 
