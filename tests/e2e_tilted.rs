@@ -48,7 +48,7 @@ fn rows(path: &std::path::Path) -> Vec<HashMap<String, String>> {
 
 #[test]
 fn a_tilted_camera_recording_is_geolocated_within_a_metre_after_the_start() {
-    geolocated_within_a_metre("tilted", "", "mount = \"fixed\"");
+    geolocated_within_a_metre("tilted", "", Output::Recording("mount = \"fixed\""));
 }
 
 /// The tracking gimbal's encoders without noise as well: the angles of each image are
@@ -57,14 +57,30 @@ fn a_tilted_camera_recording_is_geolocated_within_a_metre_after_the_start() {
 fn a_gimbal_recording_is_geolocated_within_a_metre_after_the_start() {
     geolocated_within_a_metre(
         "gimbal",
-        "camera = { width = 640, height = 480, hfov_deg = 60.0, mount_angles_deg = [0.0, -45.0, 0.0], gimbal = { tau_s = 0.3, encoder_noise_deg = 0.0 } }\n",
-        "mount = \"gimbal\"",
+        EXACT_GIMBAL,
+        Output::Recording("mount = \"gimbal\""),
     );
 }
 
-/// Simulates `preset` without navigation errors (plus `extra` TOML), checks the
-/// recording's metadata has `mount`, and geolocates it.
-fn geolocated_within_a_metre(preset: &str, extra: &str, mount: &str) {
+/// The same gimbal flown as a flight: per UAV a (lossless) video and a `.tlog` whose
+/// GIMBAL_DEVICE_ATTITUDE_STATUS messages carry the gimbal's angles beside ATTITUDE.
+#[test]
+fn a_gimbal_flight_is_geolocated_within_a_metre_after_the_start() {
+    geolocated_within_a_metre("gimbal", EXACT_GIMBAL, Output::Flight);
+}
+
+const EXACT_GIMBAL: &str = "camera = { width = 640, height = 480, hfov_deg = 60.0, mount_angles_deg = [0.0, -45.0, 0.0], gimbal = { tau_s = 0.3, encoder_noise_deg = 0.0 } }\n";
+
+/// What the simulator writes: a recording whose metadata must hold the given text, or
+/// a flight.
+enum Output {
+    Recording(&'static str),
+    Flight,
+}
+
+/// Simulates `preset` without navigation errors (plus `extra` TOML) as `output` and
+/// geolocates it.
+fn geolocated_within_a_metre(preset: &str, extra: &str, output: Output) {
     let dir = Scratch::new(preset);
     let presets = dir.0.join("presets.toml");
     let builtin = std::fs::read_to_string(PRESETS).unwrap();
@@ -78,7 +94,7 @@ fn geolocated_within_a_metre(preset: &str, extra: &str, mount: &str) {
     .unwrap();
     let (rec, out) = (dir.0.join("rec"), dir.0.join("out"));
     let (rec_s, out_s) = (rec.to_str().unwrap(), out.to_str().unwrap());
-    dualgeo(&[
+    let simulate = [
         "simulate",
         "--presets",
         presets.to_str().unwrap(),
@@ -86,26 +102,43 @@ fn geolocated_within_a_metre(preset: &str, extra: &str, mount: &str) {
         "exact",
         "--duration-s",
         "12",
-        "--jpeg-quality",
-        "95",
-        "--out",
-        rec_s,
-    ]);
-    let meta = std::fs::read_to_string(rec.join("recording.toml")).unwrap();
-    assert!(
-        meta.contains("version = 2") && meta.contains(mount),
-        "{meta}"
-    );
-    dualgeo(&["validate", rec_s]);
-    dualgeo(&["run", "--source", rec_s, "--rate", "max", "--out", out_s]);
+    ];
+    let source = match output {
+        Output::Recording(mount) => {
+            dualgeo(&[&simulate[..], &["--jpeg-quality", "95", "--out", rec_s]].concat());
+            let meta = std::fs::read_to_string(rec.join("recording.toml")).unwrap();
+            assert!(
+                meta.contains("version = 2") && meta.contains(mount),
+                "{meta}"
+            );
+            dualgeo(&["validate", rec_s]);
+            rec.clone()
+        }
+        Output::Flight => {
+            dualgeo(
+                &[
+                    &simulate[..],
+                    &["--flight-video", "lossless", "--flight-out", rec_s],
+                ]
+                .concat(),
+            );
+            rec.join("flight.toml")
+        }
+    };
+    let source = source.to_str().unwrap();
+    dualgeo(&["run", "--source", source, "--rate", "max", "--out", out_s]);
 
-    let truth: HashMap<String, [f64; 3]> = rows(&rec.join("truth.csv"))
+    // The left camera's truth by time (a flight's stream times are the autopilot
+    // clock's milliseconds: the nearest frame, within half a period).
+    let truth: Vec<(f64, [f64; 3])> = rows(&rec.join("truth.csv"))
         .into_iter()
         .filter(|r| r["uav"] == "left")
         .map(|r| {
             let v = |k: &str| r[k].parse::<f64>().unwrap();
-            let t = format!("{:.4}", v("t_s"));
-            (t, [v("target_x_m"), v("target_y_m"), v("target_z_m")])
+            (
+                v("t_s"),
+                [v("target_x_m"), v("target_y_m"), v("target_z_m")],
+            )
         })
         .collect();
     let (mut h, mut z) = (Vec::new(), Vec::new());
@@ -114,7 +147,12 @@ fn geolocated_within_a_metre(preset: &str, extra: &str, mount: &str) {
         if t < 8.0 {
             continue;
         }
-        let want = truth[&format!("{t:.4}")];
+        let (dt, want) = truth
+            .iter()
+            .map(|(tt, p)| ((tt - t).abs(), *p))
+            .min_by(|a, b| a.0.total_cmp(&b.0))
+            .expect("truth rows");
+        assert!(dt < 1.0 / 60.0, "no truth near t = {t}");
         let got = ["x_m", "y_m", "z_m"].map(|k| r[k].parse::<f64>().unwrap());
         h.push((got[0] - want[0]).hypot(got[1] - want[1]));
         z.push((got[2] - want[2]).abs());

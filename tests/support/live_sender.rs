@@ -103,6 +103,8 @@ fn series(log: &Path, system: Option<u8>) -> Series {
                 alt_m,
                 ..
             } => s.position.push((t_s, [lat_deg, lon_deg, alt_m])),
+            // The live flights played here are nadir: no gimbal to send.
+            NavSample::Gimbal { .. } => {}
         }
     }
     s

@@ -37,7 +37,8 @@
 //! Counters: `pairs_in`, `frames_in`, `pairs_dropped`, `bad_frames`, `loops`,
 //! `flow_timeouts`, `resumed`, `checkpoint_refused`, `checkpoint_failed`, and the
 //! source's own as `source.<name>` (a flight's `no_pose_position`, `no_pose_attitude`,
-//! `unpaired_frames`, `tlog_crc_errors`, `tlog_resyncs`, `tlog_truncated`).
+//! `no_pose_gimbal`, `unpaired_frames`, `tlog_crc_errors`, `tlog_resyncs`,
+//! `tlog_truncated`).
 
 use acquisition::live_gate::{LiveGate, LiveSample};
 use acquisition::recording::{StreamLog, TelemetryRow, TruthRow};

@@ -7,9 +7,18 @@
 //! the frame's time (then it is interpolated), or one within [`SAME_INSTANT_S`] (then
 //! it is used as it is). Otherwise the frame has no pose and is dropped and counted:
 //! never extrapolated across a telemetry gap.
+//!
+//! A log with gimbal attitudes (GIMBAL_DEVICE_ATTITUDE_STATUS) is a gimballed camera's:
+//! the gimbal's angles are interpolated the same way (a frame without them is dropped,
+//! `no_pose_gimbal`), and the pose given is the camera's, the body's on that mount
+//! (`PoseSample::on_mount`, recording format v2's convention). A gimbal that reports
+//! its yaw in the earth frame is turned into the body frame with the body's attitude at
+//! the same moment: the autopilot derives that yaw from the same AHRS, so the camera
+//! keeps the AHRS's yaw bias.
 
 use super::tlog::NavSample;
 use crate::recording::Origin;
+use shared_types::conventions::{body_to_ned, Attitude, Mount};
 use shared_types::messages::PoseSample;
 
 /// Samples this close to a frame's time are taken as taken at it (the autopilot clock
@@ -23,6 +32,8 @@ pub enum NoPose {
     Position,
     /// No attitude sample close enough on both sides.
     Attitude,
+    /// A gimballed camera's log, without a gimbal sample close enough on both sides.
+    Gimbal,
 }
 
 impl NoPose {
@@ -31,6 +42,7 @@ impl NoPose {
         match self {
             NoPose::Position => "no_pose_position",
             NoPose::Attitude => "no_pose_attitude",
+            NoPose::Gimbal => "no_pose_gimbal",
         }
     }
 }
@@ -41,6 +53,11 @@ pub struct NavTrack {
     positions: Vec<(f64, [f64; 3])>,
     /// (t, [roll, pitch, yaw] rad), time-sorted.
     attitudes: Vec<(f64, [f64; 3])>,
+    /// The gimbal's (t, [roll, pitch, yaw] rad), time-sorted; empty for a fixed camera.
+    gimbals: Vec<(f64, [f64; 3])>,
+    /// Whether the gimbal reports its yaw in the earth frame (its newest sample's flag:
+    /// a gimbal keeps one frame).
+    gimbal_earth_frame: bool,
 }
 
 fn enu(origin: &Origin, lat_deg: f64, lon_deg: f64, hae_m: f64) -> [f64; 3] {
@@ -96,6 +113,7 @@ impl NavTrack {
             .count() as u64;
         track.positions.sort_by(|a, b| a.0.total_cmp(&b.0));
         track.attitudes.sort_by(|a, b| a.0.total_cmp(&b.0));
+        track.gimbals.sort_by(|a, b| a.0.total_cmp(&b.0));
         (track, bad)
     }
 
@@ -127,6 +145,18 @@ impl NavTrack {
                 }
                 ok
             }
+            NavSample::Gimbal {
+                t_s,
+                rpy_rad,
+                earth_frame,
+            } => {
+                let ok = t_s.is_finite() && rpy_rad.iter().all(|v| v.is_finite());
+                if ok {
+                    self.gimbals.push((t_s, rpy_rad));
+                    self.gimbal_earth_frame = earth_frame;
+                }
+                ok
+            }
         }
     }
 
@@ -136,7 +166,7 @@ impl NavTrack {
         if !self.push(s, origin, geoid_height_m) {
             return false;
         }
-        for series in [&mut self.positions, &mut self.attitudes] {
+        for series in [&mut self.positions, &mut self.attitudes, &mut self.gimbals] {
             let n = series.len();
             if n >= 2 && series[n - 2].0 > series[n - 1].0 {
                 let last = series.remove(n - 1);
@@ -150,7 +180,7 @@ impl NavTrack {
     /// Forgets samples older than `t`, keeping the last one before it (what an
     /// interpolation at `t` needs): a live track's memory stays flat.
     pub fn forget_before(&mut self, t: f64) {
-        for series in [&mut self.positions, &mut self.attitudes] {
+        for series in [&mut self.positions, &mut self.attitudes, &mut self.gimbals] {
             let i = series.partition_point(|(ts, _)| *ts < t);
             if i > 1 {
                 series.drain(..i - 1);
@@ -180,11 +210,10 @@ impl NavTrack {
             [0, 1, 2].map(|i| a[i] + (b[i] - a[i]) * f)
         })
         .ok_or(NoPose::Position)?;
-        let r = at(&self.attitudes, t, max_gap, |a, b, f| {
-            [0, 1, 2].map(|i| lerp_angle(a[i], b[i], f))
-        })
-        .ok_or(NoPose::Attitude)?;
-        Ok(PoseSample {
+        let angles =
+            |a: &[f64; 3], b: &[f64; 3], f: f64| [0, 1, 2].map(|i| lerp_angle(a[i], b[i], f));
+        let r = at(&self.attitudes, t, max_gap, angles).ok_or(NoPose::Attitude)?;
+        let body = PoseSample {
             x_m: p[0],
             y_m: p[1],
             z_m: p[2],
@@ -192,7 +221,32 @@ impl NavTrack {
             pitch_deg: r[1].to_degrees(),
             // ATTITUDE's yaw is in (−π, π]; the project's in degrees, any turn.
             yaw_deg: r[2].to_degrees(),
-        })
+        };
+        if self.gimbals.is_empty() {
+            return Ok(body);
+        }
+        let [roll, pitch, yaw] = at(&self.gimbals, t, max_gap, angles).ok_or(NoPose::Gimbal)?;
+        let g = Attitude { yaw, pitch, roll };
+        let mount = if self.gimbal_earth_frame {
+            // C_b^G = C_n^b(body)ᵀ · C_n^G.
+            let b = Attitude {
+                yaw: r[2],
+                pitch: r[1],
+                roll: r[0],
+            };
+            let relative = body_to_ned(b).transpose() * body_to_ned(g);
+            let (roll, pitch, yaw) =
+                nalgebra::Rotation3::from_matrix_unchecked(relative).euler_angles();
+            Mount(Attitude { yaw, pitch, roll })
+        } else {
+            Mount(g)
+        };
+        Ok(body.on_mount(mount))
+    }
+
+    /// Whether the log carries a gimbal's attitude (the camera is gimballed).
+    pub fn has_gimbal(&self) -> bool {
+        !self.gimbals.is_empty()
     }
 }
 
@@ -258,6 +312,69 @@ mod tests {
         );
         let yaw = track.pose_at(0.5, 1.0).unwrap().yaw_deg.to_radians();
         assert!((yaw.abs() - pi).abs() < 1e-9, "{yaw}");
+    }
+
+    /// A gimballed camera's log: the pose is the camera's on the gimbal of that moment;
+    /// a gimbal reporting its yaw in the earth frame gives the same camera once its yaw
+    /// is the body's plus the vehicle-frame yaw; a frame without a gimbal sample near
+    /// has no pose.
+    #[test]
+    fn a_gimbal_log_gives_the_cameras_pose() {
+        let gimbal = |t_s: f64, yaw: f64, earth_frame: bool| NavSample::Gimbal {
+            t_s,
+            rpy_rad: [0.0, -0.8, yaw],
+            earth_frame,
+        };
+        let body_yaw = 0.3;
+        let samples = |earth: bool| {
+            let offset = if earth { body_yaw } else { 0.0 };
+            vec![
+                position(0.0, 0.0),
+                position(1.0, 0.0),
+                attitude(0.0, body_yaw),
+                attitude(1.0, body_yaw),
+                gimbal(0.0, 0.1 + offset, earth),
+                gimbal(1.0, 0.3 + offset, earth),
+            ]
+        };
+        let (vehicle, _) = NavTrack::new(&samples(false), &ORIGIN, 0.0);
+        assert!(vehicle.has_gimbal());
+        let pose = vehicle.pose_at(0.5, 1.0).unwrap();
+        let body = PoseSample {
+            yaw_deg: body_yaw.to_degrees(),
+            ..pose
+        };
+        let body = PoseSample {
+            roll_deg: 0.0,
+            pitch_deg: 0.0,
+            ..body
+        };
+        let want = body.on_mount(Mount(Attitude {
+            yaw: 0.2,
+            pitch: -0.8,
+            roll: 0.0,
+        }));
+        for (got, want) in [
+            (pose.yaw_deg, want.yaw_deg),
+            (pose.pitch_deg, want.pitch_deg),
+            (pose.roll_deg, want.roll_deg),
+        ] {
+            assert!((got - want).abs() < 1e-9, "{pose:?} vs {want:?}");
+        }
+        let (earth, _) = NavTrack::new(&samples(true), &ORIGIN, 0.0);
+        let same = earth.pose_at(0.5, 1.0).unwrap();
+        for (a, b) in [
+            (same.yaw_deg, pose.yaw_deg),
+            (same.pitch_deg, pose.pitch_deg),
+            (same.roll_deg, pose.roll_deg),
+        ] {
+            assert!((a - b).abs() < 1e-9, "{same:?} vs {pose:?}");
+        }
+        // Gimbal samples stop at 1 s; the body's go on.
+        let (mut gap, _) = NavTrack::new(&samples(false), &ORIGIN, 0.0);
+        gap.insert(&position(2.0, 0.0), &ORIGIN, 0.0);
+        gap.insert(&attitude(2.0, body_yaw), &ORIGIN, 0.0);
+        assert_eq!(gap.pose_at(1.5, 0.6), Err(NoPose::Gimbal));
     }
 
     #[test]

@@ -6,7 +6,7 @@
 //! A frame's moment on its UAV's autopilot clock is `video time + time_offset_s`; its
 //! pose is the telemetry interpolated there ([`NavTrack::pose_at`]) between samples at
 //! most `max_telemetry_gap_s` apart, never extrapolated: a frame without a pose loses
-//! its pair (`no_pose_position`, `no_pose_attitude`). The pair's stream time is the left
+//! its pair (`no_pose_position`, `no_pose_attitude`, `no_pose_gimbal`). The pair's stream time is the left
 //! frame's video time.
 
 use super::meta::{is_url, FlightMeta};

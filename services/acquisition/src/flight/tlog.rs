@@ -6,12 +6,14 @@
 //! A log is read whole and never refused for its content: a frame with a bad CRC is
 //! skipped by its length (`crc_errors`), bytes that are not a frame are skipped until the
 //! next one (`resyncs`), and a frame cut by the end of the file is dropped
-//! (`truncated`). Only ATTITUDE, GLOBAL_POSITION_INT and GPS_RAW_INT are kept; the
-//! time of a sample is the autopilot's own clock in the message (`time_boot_ms`,
-//! `time_usec`), not the receive time, so link latency does not enter the alignment.
+//! (`truncated`). Only ATTITUDE, GLOBAL_POSITION_INT, GPS_RAW_INT and
+//! GIMBAL_DEVICE_ATTITUDE_STATUS are kept; the time of a sample is the autopilot's own
+//! clock in the message (`time_boot_ms`, `time_usec`), not the receive time, so link
+//! latency does not enter the alignment.
 
 use mavlink::dialects::common::{
-    MavMessage, ATTITUDE_DATA, GLOBAL_POSITION_INT_DATA, GPS_RAW_INT_DATA,
+    GimbalDeviceFlags, MavMessage, ATTITUDE_DATA, GIMBAL_DEVICE_ATTITUDE_STATUS_DATA,
+    GLOBAL_POSITION_INT_DATA, GPS_RAW_INT_DATA,
 };
 use mavlink::{MavHeader, MavlinkReader, MavlinkVersion, Message};
 use std::io::Write;
@@ -34,12 +36,23 @@ pub enum NavSample {
         alt_m: f64,
         from_gps_raw: bool,
     },
+    /// The camera gimbal's attitude (GIMBAL_DEVICE_ATTITUDE_STATUS): roll, pitch, yaw
+    /// in radians, Z-Y-X, of the gimbal frame G (recording format v2: the camera looks
+    /// along G's x) relative to the body, or, with `earth_frame`, to NED (the
+    /// message's YAW_IN_EARTH_FRAME flag, or YAW_LOCK without either frame flag).
+    Gimbal {
+        t_s: f64,
+        rpy_rad: [f64; 3],
+        earth_frame: bool,
+    },
 }
 
 impl NavSample {
     pub fn t_s(&self) -> f64 {
         match self {
-            NavSample::Attitude { t_s, .. } | NavSample::Position { t_s, .. } => *t_s,
+            NavSample::Attitude { t_s, .. }
+            | NavSample::Position { t_s, .. }
+            | NavSample::Gimbal { t_s, .. } => *t_s,
         }
     }
 }
@@ -110,8 +123,40 @@ fn sample(msg: &MavMessage) -> Option<NavSample> {
             alt_m: *alt as f64 / 1e3,
             from_gps_raw: true,
         }),
+        MavMessage::GIMBAL_DEVICE_ATTITUDE_STATUS(GIMBAL_DEVICE_ATTITUDE_STATUS_DATA {
+            time_boot_ms,
+            q,
+            flags,
+            ..
+        }) => {
+            let [w, x, y, z] = q.map(|v| v as f64);
+            let (roll, pitch, yaw) =
+                nalgebra::UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(w, x, y, z))
+                    .euler_angles();
+            let earth_frame = flags.contains(GimbalDeviceFlags::GIMBAL_DEVICE_FLAGS_YAW_IN_EARTH_FRAME)
+                || (!flags.contains(GimbalDeviceFlags::GIMBAL_DEVICE_FLAGS_YAW_IN_VEHICLE_FRAME)
+                    && flags.contains(GimbalDeviceFlags::GIMBAL_DEVICE_FLAGS_YAW_LOCK));
+            Some(NavSample::Gimbal {
+                t_s: *time_boot_ms as f64 / 1e3,
+                rpy_rad: [roll, pitch, yaw],
+                earth_frame,
+            })
+        }
         _ => None,
     }
+}
+
+/// GIMBAL_DEVICE_ATTITUDE_STATUS for a gimbal at `rpy_rad` (roll, pitch, yaw, Z-Y-X)
+/// relative to the body (YAW_IN_VEHICLE_FRAME), at `time_boot_ms`.
+pub fn gimbal_message(time_boot_ms: u32, rpy_rad: [f64; 3]) -> MavMessage {
+    let [roll, pitch, yaw] = rpy_rad;
+    let q = nalgebra::UnitQuaternion::from_euler_angles(roll, pitch, yaw);
+    MavMessage::GIMBAL_DEVICE_ATTITUDE_STATUS(GIMBAL_DEVICE_ATTITUDE_STATUS_DATA {
+        time_boot_ms,
+        q: [q.w, q.i, q.j, q.k].map(|v| v as f32),
+        flags: GimbalDeviceFlags::GIMBAL_DEVICE_FLAGS_YAW_IN_VEHICLE_FRAME,
+        ..Default::default()
+    })
 }
 
 /// The message ids dualgeo reads (others are skipped by their length, undecoded: the
@@ -120,6 +165,15 @@ fn sample(msg: &MavMessage) -> Option<NavSample> {
 const GPS_RAW_INT_ID: u32 = 24;
 const ATTITUDE_ID: u32 = 30;
 const GLOBAL_POSITION_INT_ID: u32 = 33;
+const GIMBAL_DEVICE_ATTITUDE_STATUS_ID: u32 = 285;
+
+/// Whether dualgeo decodes messages of this id.
+fn is_read(id: u32) -> bool {
+    matches!(
+        id,
+        GPS_RAW_INT_ID | ATTITUDE_ID | GLOBAL_POSITION_INT_ID | GIMBAL_DEVICE_ATTITUDE_STATUS_ID
+    )
+}
 
 /// (message id, sending system, sequence) from a frame's header.
 fn header_fields(frame: &[u8]) -> Option<(u32, u8, u8)> {
@@ -190,7 +244,7 @@ pub fn parse_tlog(bytes: &[u8]) -> (Vec<(u8, NavSample)>, TlogCounts) {
             at += 1;
             continue;
         };
-        if !matches!(id, GPS_RAW_INT_ID | ATTITUDE_ID | GLOBAL_POSITION_INT_ID) {
+        if !is_read(id) {
             if in_sync {
                 // Another message: skipped by its length, unchecked.
                 counts.frames += 1;
@@ -276,15 +330,14 @@ pub fn split_datagram(bytes: &[u8]) -> (Vec<LiveFrame>, bool) {
             frame[4]
         };
         let frame = &frame[..len];
-        let (crc_ok, sample) =
-            if matches!(id, GPS_RAW_INT_ID | ATTITUDE_ID | GLOBAL_POSITION_INT_ID) {
-                match decode_frame(frame) {
-                    Some(msg) => (true, sample(&msg)),
-                    None => (false, None),
-                }
-            } else {
-                (true, None)
-            };
+        let (crc_ok, sample) = if is_read(id) {
+            match decode_frame(frame) {
+                Some(msg) => (true, sample(&msg)),
+                None => (false, None),
+            }
+        } else {
+            (true, None)
+        };
         frames.push(LiveFrame {
             system,
             component,
@@ -392,6 +445,27 @@ mod tests {
         let (frames, rest) = split_datagram(&bytes[..bytes.len() - 3]);
         assert_eq!(frames.len(), 1, "a cut frame is not a frame");
         assert!(rest);
+    }
+
+    #[test]
+    fn a_gimbal_attitude_reads_back_in_its_frame() {
+        let mut w = TlogWriter::new(Vec::new(), 1);
+        w.write(1, &gimbal_message(1500, [0.01, -0.9, 0.35]))
+            .unwrap();
+        let (samples, counts) = parse_tlog(&w.into_inner());
+        assert_eq!((samples.len(), counts.crc_errors), (1, 0));
+        let NavSample::Gimbal {
+            t_s,
+            rpy_rad,
+            earth_frame,
+        } = samples[0].1
+        else {
+            panic!("{samples:?}");
+        };
+        assert_eq!((t_s, earth_frame), (1.5, false));
+        for (got, want) in rpy_rad.iter().zip([0.01, -0.9, 0.35]) {
+            assert!((got - want).abs() < 1e-6, "{rpy_rad:?}");
+        }
     }
 
     #[test]

@@ -130,13 +130,18 @@ impl FlightWriter {
     }
 
     /// One frame of `uav` at stream time `t_s`: its image, its measured pose (to the
-    /// log) and its truth (to truth.csv).
+    /// log) and its truth (to truth.csv). `measured` is the camera's pose (its
+    /// equivalent nadir one, as telemetry.csv and truth.csv carry it); a camera on a
+    /// mount gives `gimbal`: the body's measured pose and the gimbal's measured angles
+    /// (yaw, pitch, roll, degrees), which the log carries as ATTITUDE and
+    /// GIMBAL_DEVICE_ATTITUDE_STATUS (yaw in the vehicle frame).
     pub fn write_frame(
         &mut self,
         uav: Uav,
         t_s: f64,
         image: &cv::Mat,
         measured: PoseSample,
+        gimbal: Option<(PoseSample, [f64; 3])>,
         truth: &TruthRow,
     ) -> Result<(), String> {
         let i = uav.index();
@@ -151,12 +156,19 @@ impl FlightWriter {
             self.meta.origin.alt_m,
             map_3d::Ellipsoid::WGS84,
         );
+        let body = gimbal.map_or(measured, |(body, _)| body);
         let attitude = MavMessage::ATTITUDE(ATTITUDE_DATA {
             time_boot_ms,
-            roll: measured.roll_deg.to_radians() as f32,
-            pitch: measured.pitch_deg.to_radians() as f32,
-            yaw: wrapped_rad(measured.yaw_deg),
+            roll: body.roll_deg.to_radians() as f32,
+            pitch: body.pitch_deg.to_radians() as f32,
+            yaw: wrapped_rad(body.yaw_deg),
             ..Default::default()
+        });
+        let gimbal = gimbal.map(|(_, [yaw, pitch, roll])| {
+            super::tlog::gimbal_message(
+                time_boot_ms,
+                [roll.to_radians(), pitch.to_radians(), yaw.to_radians()],
+            )
         });
         let position = MavMessage::GLOBAL_POSITION_INT(GLOBAL_POSITION_INT_DATA {
             time_boot_ms,
@@ -170,7 +182,10 @@ impl FlightWriter {
         });
         let receive_us = EPOCH_US + (t_s * 1e6).round() as u64;
         let log_path = self.dir.join(format!("{}.tlog", uav.name()));
-        for msg in [&attitude, &position] {
+        for msg in [Some(&attitude), Some(&position), gimbal.as_ref()]
+            .into_iter()
+            .flatten()
+        {
             self.logs[i]
                 .write(receive_us, msg)
                 .map_err(|e| io(&log_path, e))?;

@@ -1,5 +1,6 @@
 //! Rendering a scenario into a recording (format v1; v2 with a tilted or gimballed
-//! camera) or a flight (videos + tlogs; nadir cameras only), with truth.
+//! camera) or a flight (videos + tlogs; a tilted or gimballed camera's angles as
+//! GIMBAL_DEVICE_ATTITUDE_STATUS), with truth.
 
 use super::simulator::{SimStep, Simulator};
 use super::SimError;
@@ -75,7 +76,14 @@ impl PairSink for RecordingWriter {
     }
 }
 
-impl PairSink for FlightWriter {
+/// A flight being written, with the fixed mount's angles (yaw, pitch, roll, degrees)
+/// of a tilted camera.
+struct FlightSink {
+    writer: FlightWriter,
+    mount_angles: Option<[f64; 3]>,
+}
+
+impl PairSink for FlightSink {
     fn write_pair(
         &mut self,
         step: &SimStep,
@@ -92,7 +100,11 @@ impl PairSink for FlightWriter {
                 target_px: frame.target_px,
                 gimbal: None,
             };
-            self.write_frame(frame.uav, frame.t_s, image, frame.measured, &truth)
+            // A tilted camera's fixed angles, or the gimbal's of this frame.
+            let angles = frame.gimbal.map(|g| g.measured_deg).or(self.mount_angles);
+            let gimbal = angles.map(|a| (frame.body_measured, a));
+            self.writer
+                .write_frame(frame.uav, frame.t_s, image, frame.measured, gimbal, &truth)
                 .map_err(SimError::Config)?;
         }
         Ok(())
@@ -156,17 +168,12 @@ pub fn record_flight(
     progress: impl FnMut(u64, u64),
 ) -> Result<(RecordSummary, &'static str), SimError> {
     let config = sim.config().clone();
-    if config.camera.mount().is_some() {
-        return Err(SimError::Config(
-            "a flight (video + tlog) carries nadir cameras only; record a tilted camera as a recording (dualgeo simulate --out)".into(),
-        ));
-    }
     let origin = config.origin.ok_or_else(|| {
         SimError::Config(
             "a flight needs the scenario's geodetic origin (the preset has none)".into(),
         )
     })?;
-    let mut writer = FlightWriter::create(
+    let writer = FlightWriter::create(
         out,
         name,
         config.frame_rate_hz,
@@ -175,9 +182,14 @@ pub fn record_flight(
         codec,
     )
     .map_err(SimError::Config)?;
-    let summary = render_into(sim, &mut writer, progress)?;
-    let codec = writer.codec();
-    writer.finish().map_err(SimError::Config)?;
+    // A tilted or gimballed camera's angles go to the logs as the gimbal's attitude.
+    let mut sink = FlightSink {
+        writer,
+        mount_angles: config.camera.mount_angles_deg,
+    };
+    let summary = render_into(sim, &mut sink, progress)?;
+    let codec = sink.writer.codec();
+    sink.writer.finish().map_err(SimError::Config)?;
     Ok((summary, codec))
 }
 
