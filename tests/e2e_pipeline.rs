@@ -18,6 +18,14 @@ fn dualgeo(args: &[&str]) -> Output {
         .expect("spawn dualgeo")
 }
 
+/// `dualgeo run --source REC --rate max --config CONFIG --out OUT`.
+fn run_max_with_config(rec: &str, config: &std::path::Path, out: &str) -> Output {
+    let config = config.to_str().expect("a UTF-8 path");
+    dualgeo(&[
+        "run", "--source", rec, "--rate", "max", "--config", config, "--out", out,
+    ])
+}
+
 fn text(b: &[u8]) -> String {
     String::from_utf8_lossy(b).into_owned()
 }
@@ -153,17 +161,7 @@ fn pipeline_on_a_recording_and_a_corrupt_image() {
     )
     .unwrap();
     let out_t = dir.s("out-temporal");
-    let o = dualgeo(&[
-        "run",
-        "--source",
-        &rec,
-        "--rate",
-        "max",
-        "--config",
-        config.to_str().unwrap(),
-        "--out",
-        &out_t,
-    ]);
+    let o = run_max_with_config(&rec, &config, &out_t);
     let stderr = text(&o.stderr);
     assert!(o.status.success(), "{stderr}");
     // The service read its table and says what it has: all of it, or (without
@@ -499,18 +497,7 @@ fn the_configured_learned_detector_runs_in_the_detection_service() {
         ),
     )
     .unwrap();
-    let out = dir.s("out");
-    let o = dualgeo(&[
-        "run",
-        "--source",
-        &rec,
-        "--rate",
-        "max",
-        "--config",
-        config.to_str().unwrap(),
-        "--out",
-        &out,
-    ]);
+    let o = run_max_with_config(&rec, &config, &dir.s("out"));
     assert!(o.status.success(), "{}", text(&o.stderr));
     let counters = json(&dir.join("out/counters.json"));
     // 60 frames per camera; nothing found, so each camera's frames all go to the
