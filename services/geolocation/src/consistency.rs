@@ -6,7 +6,7 @@
 //! Estimates that agree with most others are kept; a wrong correspondence gives a bias
 //! estimate that disagrees with the rest.
 
-use crate::iteration::{geolocate, Estimate};
+use crate::iteration::{geolocate, geolocate_paper, Estimate};
 use crate::{EstimatorConfig, EstimatorError, Observation};
 
 /// What eq. (29)–(32) decided for a set of 2N − 2 bias estimates.
@@ -131,6 +131,29 @@ pub fn geolocate_filtered(
     current_right: &Observation,
     past: &[Observation],
     config: &EstimatorConfig,
+) -> Result<FilteredEstimate, EstimatorError> {
+    filtered_with(current_left, current_right, past, config, geolocate)
+}
+
+/// [`geolocate_filtered`] with the paper's iteration exactly (no restarts for oblique
+/// rays, `iteration::geolocate_paper`): the evaluation's "paper's method" columns.
+pub fn geolocate_filtered_paper(
+    current_left: &Observation,
+    current_right: &Observation,
+    past: &[Observation],
+    config: &EstimatorConfig,
+) -> Result<FilteredEstimate, EstimatorError> {
+    filtered_with(current_left, current_right, past, config, geolocate_paper)
+}
+
+type Solve = fn(&[Observation], &EstimatorConfig) -> Result<Estimate, EstimatorError>;
+
+fn filtered_with(
+    current_left: &Observation,
+    current_right: &Observation,
+    past: &[Observation],
+    config: &EstimatorConfig,
+    geolocate: Solve,
 ) -> Result<FilteredEstimate, EstimatorError> {
     let mut past_rejections: Vec<Option<PastImageRejection>> = vec![None; past.len()];
     let mut group_biases = Vec::with_capacity(past.len());

@@ -37,11 +37,11 @@ pub mod temporal_snapshot;
 pub use config::{EstimatorConfig, EstimatorMethod, NoiseModel};
 pub use configured::{estimate_set, SetEstimate};
 pub use consistency::{
-    consistency_filter, geolocate_configured, geolocate_filtered, ConsistencyOutcome,
-    FilteredEstimate,
+    consistency_filter, geolocate_configured, geolocate_filtered, geolocate_filtered_paper,
+    ConsistencyOutcome, FilteredEstimate,
 };
 pub use error::EstimatorError;
-pub use iteration::{geolocate, Estimate};
+pub use iteration::{geolocate, geolocate_paper, Estimate};
 pub use observation::{ImageId, Observation, PastImage};
 pub use one_shot::one_shot;
 pub use temporal::{Quality, TemporalEstimate, TemporalEstimator};

@@ -12,6 +12,7 @@ use acquisition::recording::{
 };
 use acquisition::resume::StreamPosition;
 use detection::frame_view::frame_mat;
+use detection::config::DetectionConfig;
 use detection::{ColourBlobConfig, TrackedDetector};
 use geolocation::set_message::{estimate_message, finite, is_stale, Resume, CHECKPOINT_KIND};
 use geolocation::{EstimatorConfig, EstimatorMethod, TemporalEstimator};
@@ -88,8 +89,10 @@ pub fn config(data: &[u8]) {
     let estimator = parse_section::<EstimatorConfig>(text, "estimator")
         .ok()
         .filter(|e| e.validate().is_ok());
-    if let Ok(detection) = parse_section::<ColourBlobConfig>(text, "detection") {
-        let _ = TrackedDetector::new(detection);
+    // As the detection service reads it; a learned model is not loaded here (a model
+    // file is not fuzz input).
+    if let Ok(detection) = parse_section::<DetectionConfig>(text, "detection") {
+        let _ = TrackedDetector::new(detection.colour);
     }
     if let Some(e) = estimator {
         if e.method == EstimatorMethod::Temporal {

@@ -12,7 +12,7 @@ use super::vision::{ImageRef, Record};
 use acquisition::sim::SimConfig;
 use geolocation::evaluation::ErrorStats;
 use geolocation::{
-    geolocate_configured, geolocate_filtered, one_shot, EstimatorConfig, EstimatorMethod,
+    geolocate_configured, geolocate_filtered_paper, one_shot, EstimatorConfig, EstimatorMethod,
     NoiseModel, Observation, PastImage, TemporalEstimator,
 };
 use nalgebra::Vector2;
@@ -273,7 +273,7 @@ pub fn run(
             .collect();
         let past: Vec<Observation> = past_ids.iter().map(|image| image.observation).collect();
         let true_bias = [bl, br];
-        let paper = geolocate_filtered(&cl, &cr, &past, &estimator);
+        let paper = geolocate_filtered_paper(&cl, &cr, &past, &estimator);
         match &paper {
             Ok(f) => {
                 out.paper.push(
@@ -331,7 +331,7 @@ pub fn run(
                 bias_tolerance_deg: 0.0,
                 ..estimator
             };
-            match geolocate_filtered(&cl, &cr, &past, &fixed) {
+            match geolocate_filtered_paper(&cl, &cr, &past, &fixed) {
                 Ok(f) => errors.push(
                     f.estimate.position,
                     r.target,

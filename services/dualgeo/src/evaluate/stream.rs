@@ -11,7 +11,7 @@ use anyhow::Result;
 use detection::prediction_gate::{self, GateConfig, RecentPredictions, TargetPrediction};
 use detection::{ColourBlobConfig, TrackCounts, TrackedDetector};
 use geolocation::{
-    estimate_set, geolocate_filtered, EstimatorConfig, EstimatorError, EstimatorMethod,
+    estimate_set, geolocate_filtered_paper, EstimatorConfig, EstimatorError, EstimatorMethod,
     FilteredEstimate, PastImage, SetEstimate, TemporalEstimator,
 };
 use matching::epipolar::MatchReject;
@@ -290,7 +290,7 @@ impl Lane {
             // same set but not timed.
             cpu_us = process_cpu_ns().saturating_sub(started) as f64 / 1e3;
             if self.score_paper {
-                paper = Some(geolocate_filtered(
+                paper = Some(geolocate_filtered_paper(
                     &set.current[0],
                     &set.current[1],
                     &set.past_observations,

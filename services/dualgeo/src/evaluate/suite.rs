@@ -21,7 +21,7 @@ use shared_types::nav_noise::{BiasModel, NavNoise};
 use std::collections::BTreeMap;
 
 /// The suite's scenes, in the order of the table.
-pub const SUITE: [&str; 10] = [
+pub const SUITE: [&str; 12] = [
     "suite_town",
     "suite_downtown",
     "suite_suburban",
@@ -32,6 +32,10 @@ pub const SUITE: [&str; 10] = [
     "suite_wide_lens",
     "suite_degraded",
     "suite_traffic",
+    // Format v2: cameras 30° forward on a fixed mount, and tracking gimbals 45° off
+    // nadir (the town's flight seen obliquely).
+    "tilted",
+    "gimbal",
 ];
 
 /// Seconds before errors count (the temporal filter's warm-up, and the rings filling).

@@ -40,7 +40,7 @@ pub fn section(results: &[SceneResult], every: u64, seconds: f64) -> String {
     );
     let _ = writeln!(
         w,
-        "Each `suite_*` preset (`dualgeo simulate --list`) is rendered once and streamed through the whole chain (colour detector, spread ORB, guided matching, ground-plane F, transfer) with the default configuration, every {every}{} pair, under both protocols: Table 1 gives the chain the true poses; Table 2 the measured ones (σ_att 2°, σ_pos 3 m, eq. 34 biases with δψ0 = 20°), keyframes chosen by them as in flight. Errors count after a {SUITE_WARM_UP_S:.0} s warm-up. {:.0} s on this 2-core machine. Regenerate with `cargo run --release -p dualgeo -- evaluate` (or `-- evaluate --suite-only`).\n",
+        "Each suite preset (`dualgeo simulate --list`: the `suite_*` scenes, and `tilted` and `gimbal`, the town seen by cameras 30° forward and by tracking gimbals 45° off nadir) is rendered once and streamed through the whole chain (colour detector, spread ORB, guided matching, ground-plane F, transfer) with the default configuration, every {every}{} pair, under both protocols: Table 1 gives the chain the true poses; Table 2 the measured ones (σ_att 2°, σ_pos 3 m, eq. 34 biases with δψ0 = 20°), keyframes chosen by them as in flight. Errors count after a {SUITE_WARM_UP_S:.0} s warm-up. {:.0} s on this 2-core machine. Regenerate with `cargo run --release -p dualgeo -- evaluate` (or `-- evaluate --suite-only`).\n",
         ordinal(every),
         seconds
     );
