@@ -81,7 +81,12 @@ enum Output {
 /// Simulates `preset` without navigation errors (plus `extra` TOML) as `output` and
 /// geolocates it.
 fn geolocated_within_a_metre(preset: &str, extra: &str, output: Output) {
-    let dir = Scratch::new(preset);
+    // Tests run in parallel: a scratch directory per preset and output kind.
+    let kind = match output {
+        Output::Recording(_) => "recording",
+        Output::Flight => "flight",
+    };
+    let dir = Scratch::new(&format!("{preset}-{kind}"));
     let presets = dir.0.join("presets.toml");
     let builtin = std::fs::read_to_string(PRESETS).unwrap();
     std::fs::create_dir_all(&dir.0).unwrap();
