@@ -506,3 +506,57 @@ fn the_configured_learned_detector_runs_in_the_detection_service() {
     assert!(runs >= 2, "{counters}");
     assert_eq!(counters["detection.frames"], 120, "{counters}");
 }
+
+/// `[detection] kind = "motion"` in the real detection service: a silver car (the
+/// colour detector's red is absent) is found by its motion, designated per camera at
+/// the frame the detector first looks, and geolocated.
+#[test]
+fn the_motion_detector_runs_in_the_detection_service() {
+    let dir = Scratch::new("motion-run");
+    let rec = dir.s("rec");
+    let o = dualgeo(&[
+        "simulate",
+        "--preset",
+        "silver_parked",
+        "--duration-s",
+        "4",
+        "--out",
+        &rec,
+    ]);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    // The operator's click: the target's pixel in frame 20 of each camera (the test
+    // reads truth.csv; the detector never does).
+    let truth = std::fs::read_to_string(dir.join("rec/truth.csv")).unwrap();
+    let click = |uav: &str| {
+        let row = truth
+            .lines()
+            .find(|l| l.starts_with(&format!("{uav},20,")))
+            .unwrap();
+        let f: Vec<&str> = row.split(',').collect();
+        format!("[{}, {}]", f[12], f[13])
+    };
+    let config = dir.join("motion.toml");
+    std::fs::write(
+        &config,
+        format!(
+            "[detection]\nkind = \"motion\"\n[detection.motion]\nacquire_px = [{}, {}]\n",
+            click("left"),
+            click("right")
+        ),
+    )
+    .unwrap();
+    let o = run_max_with_config(&rec, &config, &dir.s("out"));
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    let counters = json(&dir.join("out/counters.json"));
+    assert_eq!(counters["detection.frames"], 240, "{counters}");
+    assert!(
+        counters["detection.acquired"].as_u64().unwrap_or(0) >= 2,
+        "{counters}"
+    );
+    // From frame 20 on, 100 frames per camera: most of them found.
+    let found = counters["detection.found"].as_u64().unwrap_or(0);
+    assert!(found >= 160, "{counters}");
+    // The keyframe rings need ~3.5 s of baseline: a few estimates at the end.
+    let track = std::fs::read_to_string(dir.join("out/track.csv")).unwrap();
+    assert!(track.lines().count() >= 3, "{track}");
+}

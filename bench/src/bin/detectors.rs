@@ -9,12 +9,25 @@
 //! - `yolo`: the learned model (default: the YOLOv2-tiny COCO model `scripts/setup.sh`
 //!   installs) on every `--yolo-every`-th frame, alone (no tracker): what the model
 //!   itself sees, with `classes` car, bus, truck; `yolo any` counts a box of any class.
+//! - `motion`: the motion detector (`[detection] kind = "motion"`, defaults) on every
+//!   frame, without the geolocation filter's gate: `motion (centre)` acquires the mover
+//!   nearest the image centre, `motion (designated)` the one nearest `acquire_px` set to
+//!   the target's pixel in the first frame (what an operator's click on the target
+//!   gives; the detector reads nothing else of the truth). It looks from frame
+//!   `2 × short_gap_frames` on (it needs that many frames behind it): its rows count
+//!   from there.
 //!
-//! Run: `cargo run --release -p dualgeo-bench --bin detectors [-- --seconds 10]`
+//! `wrong` is the share of frames where the detector named something other than the
+//! target (a detection farther than `--hit-px` from the truth pixel, or any detection
+//! while the target is out of view).
+//!
+//! Run: `cargo run --release -p dualgeo-bench --bin detectors [-- --seconds 10
+//! --presets default,silver_parked --detectors colour,motion]`
 
 use acquisition::sim::{Presets, Simulator};
 use anyhow::{Context, Result};
 use clap::Parser;
+use detection::motion::{MotionConfig, MotionDetector};
 use detection::yolo::{ClassRef, YoloConfig, YoloDetector, YoloLayout};
 use detection::{ColourBlobConfig, Detection, Detector, TrackedDetector};
 use opencv::core as cv;
@@ -42,6 +55,9 @@ struct Args {
     /// The model's input size.
     #[arg(long, default_value_t = 416)]
     input_size: i32,
+    /// Which detectors to run: colour, yolo, motion.
+    #[arg(long, value_delimiter = ',', default_value = "colour,yolo,motion")]
+    detectors: Vec<String>,
 }
 
 #[derive(Default)]
@@ -49,6 +65,7 @@ struct Tally {
     visible: u64,
     detections: u64,
     hits: u64,
+    wrong: u64,
     errors_px: Vec<f64>,
     costs_ms: Vec<f64>,
 }
@@ -64,8 +81,10 @@ impl Tally {
             if e <= hit_px {
                 self.hits += 1;
                 self.errors_px.push(e);
+                return;
             }
         }
+        self.wrong += 1;
     }
 
     fn row(&self, name: &str, preset: &str) {
@@ -82,10 +101,11 @@ impl Tally {
             _ => "—".into(),
         };
         println!(
-            "| {preset} | {name} | {} | {} | {} | {error} | {cost} |",
+            "| {preset} | {name} | {} | {} | {} | {} | {error} | {cost} |",
             self.costs_ms.len(),
             share(self.hits, self.visible),
             share(self.hits, self.detections),
+            share(self.wrong, self.costs_ms.len() as u64),
         );
     }
 }
@@ -124,15 +144,22 @@ fn main() -> Result<()> {
     )?;
     let mut any = yolo(&args, Vec::new())?;
     println!(
-        "| preset | detector | frames | recall | precision | centre error (px, median) | ms per frame (p50 / p90) |"
+        "| preset | detector | frames | recall | precision | wrong | centre error (px, median) | ms per frame (p50 / p90) |"
     );
-    println!("| --- | --- | --- | --- | --- | --- | --- |");
+    println!("| --- | --- | --- | --- | --- | --- | --- | --- |");
+    let runs = |d: &str| args.detectors.iter().any(|x| x == d);
     for preset in &args.presets {
         let mut config = Presets::builtin().get(preset)?;
         config.duration_s = args.seconds;
         let (w, h) = (config.camera.width as i32, config.camera.height as i32);
         let mut sim = Simulator::new(config)?;
         let mut colour = TrackedDetector::new(ColourBlobConfig::default())?;
+        let mut motion = MotionDetector::new(MotionConfig::default())?;
+        let mut designated: Option<MotionDetector> = None;
+        // The motion detector looks from the frame 2 × short_gap_frames on; its rows
+        // count from there.
+        let warm_up = 2 * u64::from(MotionConfig::default().short_gap_frames);
+        let (mut m_tally, mut d_tally) = (Tally::default(), Tally::default());
         let blank = || cv::Mat::new_rows_cols_with_default(h, w, cv::CV_8UC3, cv::Scalar::all(0.0));
         let mut frames = [blank()?, blank()?];
         let (mut c_tally, mut y_tally, mut any_tally) =
@@ -148,10 +175,35 @@ fn main() -> Result<()> {
             );
             for (camera, frame) in frames.iter().enumerate() {
                 let truth = step.frames[camera].target_px;
-                let t = Instant::now();
-                let found = colour.detect(camera, step.frames[camera].t_s, frame)?;
-                c_tally.see(truth, found, args.hit_px, t.elapsed().as_secs_f64() * 1e3);
-                if k.is_multiple_of(args.yolo_every.max(1)) {
+                if runs("colour") {
+                    let t = Instant::now();
+                    let found = colour.detect(camera, step.frames[camera].t_s, frame)?;
+                    c_tally.see(truth, found, args.hit_px, t.elapsed().as_secs_f64() * 1e3);
+                }
+                if runs("motion") {
+                    let t = Instant::now();
+                    let found = motion.detect(camera, frame, None)?;
+                    if k >= warm_up {
+                        m_tally.see(truth, found, args.hit_px, t.elapsed().as_secs_f64() * 1e3);
+                    }
+                    let d = designated.get_or_insert_with(|| {
+                        MotionDetector::new(MotionConfig::default()).expect("default config")
+                    });
+                    // The operator's click when the detector first looks.
+                    if k == warm_up {
+                        if let Some(px) = truth {
+                            d.designate(camera, px);
+                        }
+                    }
+                    {
+                        let t = Instant::now();
+                        let found = d.detect(camera, frame, None)?;
+                        if k >= warm_up {
+                            d_tally.see(truth, found, args.hit_px, t.elapsed().as_secs_f64() * 1e3);
+                        }
+                    }
+                }
+                if runs("yolo") && k.is_multiple_of(args.yolo_every.max(1)) {
                     let t = Instant::now();
                     let found = vehicles.detect(frame)?;
                     y_tally.see(truth, found, args.hit_px, t.elapsed().as_secs_f64() * 1e3);
@@ -162,9 +214,17 @@ fn main() -> Result<()> {
             }
             k += 1;
         }
-        c_tally.row("colour", preset);
-        y_tally.row("yolo (car, bus, truck)", preset);
-        any_tally.row("yolo (any class)", preset);
+        if runs("colour") {
+            c_tally.row("colour", preset);
+        }
+        if runs("yolo") {
+            y_tally.row("yolo (car, bus, truck)", preset);
+            any_tally.row("yolo (any class)", preset);
+        }
+        if runs("motion") {
+            m_tally.row("motion (centre)", preset);
+            d_tally.row("motion (designated)", preset);
+        }
     }
     Ok(())
 }

@@ -2,7 +2,7 @@
 //!
 //! ```toml
 //! [detection]
-//! kind = "yolo"            # "colour" (default) or "yolo"
+//! kind = "yolo"            # "colour" (default), "yolo" or "motion"
 //! saturation_min = 150     # the colour detector's keys stay at this level
 //!
 //! [detection.yolo]
@@ -10,10 +10,14 @@
 //! config = "data/models/yolov2-tiny/yolov2-tiny.cfg"
 //! names = "data/models/yolov2-tiny/coco.names"
 //! classes = ["car", "bus", "truck"]
+//!
+//! [detection.motion]       # optional with kind = "motion": every key has a default
+//! threshold = 30
 //! ```
 //!
 //! Unknown keys are refused at every level, as everywhere in the configuration.
 
+use crate::motion::MotionConfig;
 use crate::yolo::YoloConfig;
 use crate::ColourBlobConfig;
 use serde::{Deserialize, Serialize};
@@ -28,6 +32,8 @@ pub enum DetectorKind {
     /// A YOLO model through OpenCV DNN, carried between its runs by a template tracker
     /// (`learned.rs`).
     Yolo,
+    /// Whatever moves against the ground, any colour, no model (`motion`).
+    Motion,
 }
 
 /// The whole `[detection]` section.
@@ -39,6 +45,8 @@ pub struct DetectionConfig {
     pub colour: ColourBlobConfig,
     /// `[detection.yolo]`, required with `kind = "yolo"`.
     pub yolo: Option<YoloConfig>,
+    /// `[detection.motion]` (defaults when absent).
+    pub motion: MotionConfig,
 }
 
 impl TryFrom<toml::Table> for DetectionConfig {
@@ -48,7 +56,7 @@ impl TryFrom<toml::Table> for DetectionConfig {
         let kind = match table.remove("kind") {
             Some(v) => v
                 .try_into::<DetectorKind>()
-                .map_err(|e| format!("kind: {e} (expected \"colour\" or \"yolo\")"))?,
+                .map_err(|e| format!("kind: {e} (expected \"colour\", \"yolo\" or \"motion\")"))?,
             None => DetectorKind::default(),
         };
         let yolo = match table.remove("yolo") {
@@ -58,13 +66,29 @@ impl TryFrom<toml::Table> for DetectionConfig {
             ),
             None => None,
         };
+        let motion = match table.remove("motion") {
+            Some(v) => {
+                let m = v
+                    .try_into::<MotionConfig>()
+                    .map_err(|e| format!("[detection.motion]: {e}"))?;
+                m.validate()
+                    .map_err(|e| format!("[detection.motion]: {e}"))?;
+                m
+            }
+            None => MotionConfig::default(),
+        };
         if kind == DetectorKind::Yolo && yolo.is_none() {
             return Err("kind = \"yolo\" needs a [detection.yolo] table with its model".into());
         }
         let colour = toml::Value::Table(table)
             .try_into::<ColourBlobConfig>()
             .map_err(|e| e.to_string())?;
-        Ok(Self { kind, colour, yolo })
+        Ok(Self {
+            kind,
+            colour,
+            yolo,
+            motion,
+        })
     }
 }
 
@@ -86,6 +110,16 @@ mod tests {
     }
 
     #[test]
+    fn motion_takes_its_optional_table() {
+        let c = parse("[detection]\nkind = \"motion\"\n").unwrap();
+        assert_eq!(c.kind, DetectorKind::Motion);
+        assert_eq!(c.motion, MotionConfig::default());
+        let c =
+            parse("[detection]\nkind = \"motion\"\n[detection.motion]\nthreshold = 40\n").unwrap();
+        assert_eq!(c.motion.threshold, 40.0);
+    }
+
+    #[test]
     fn yolo_takes_its_table_and_bad_keys_are_refused() {
         let c = parse(
             "[detection]\nkind = \"yolo\"\n[detection.yolo]\nmodel = \"m.weights\"\nconfig = \"m.cfg\"\nclasses = [\"car\", 7]\n",
@@ -104,6 +138,11 @@ mod tests {
         for (bad, says) in [
             ("[detection]\nkind = \"yolo\"\n", "needs a [detection.yolo]"),
             ("[detection]\nkind = \"sonar\"\n", "kind"),
+            (
+                "[detection]\nkind = \"motion\"\n[detection.motion]\nthreshold = 0\n",
+                "threshold",
+            ),
+            ("[detection.motion]\nradius = 3\n", "radius"),
             ("[detection]\nhue = 3\n", "hue"),
             (
                 "[detection]\nkind = \"yolo\"\n[detection.yolo]\nmodel = \"m\"\nconfidence = 0.3\n",

@@ -3,14 +3,15 @@
 //! Finding the target in a frame: the [`Detector`] trait, the classical colour-blob
 //! detector ([`ColourBlobDetector`], the default) and the YOLO detector over OpenCV DNN
 //! ([`yolo`]), run in a stream by [`learned`] with a template tracker between its
-//! answers. `[detection] kind` chooses ([`config`]). Detectors see pixels only, never
-//! truth.
+//! answers, and the motion detector ([`motion`]: whatever moves against the ground).
+//! `[detection] kind` chooses ([`config`]). Detectors see pixels only, never truth.
 
 mod colour_blob;
 pub mod config;
 pub mod constellation;
 pub mod frame_view;
 pub mod learned;
+pub mod motion;
 mod partial_view;
 pub mod prediction_gate;
 pub mod template_track;

@@ -19,13 +19,16 @@
 //! `frames_shed` (late with a newer frame of the same UAV waiting: skipped, no message).
 //! With `[detection] kind = "yolo"` (`detection::learned`): `model_runs`,
 //! `model_found`, `tracked`, `track_lost`, and the histogram `model` (µs per model run,
-//! on its own thread).
+//! on its own thread). With `kind = "motion"` (`detection::motion`): `movers` (blobs
+//! moving against the ground, summed over frames), `no_ground` (frames whose ground
+//! motion was not measured), `acquired` and `track_lost`.
 
 use anyhow::{Context, Result};
 use clap::Parser;
 use detection::config::{DetectionConfig, DetectorKind};
 use detection::frame_view::frame_mat;
 use detection::learned::LearnedDetector;
+use detection::motion::MotionDetector;
 use detection::prediction_gate::{gate_for, FrameGeometry, RecentPredictions, TargetPrediction};
 use detection::TrackedDetector;
 use shared_types::clock::{elapsed_us, monotonic_ns};
@@ -136,6 +139,7 @@ fn run() -> Result<()> {
 enum Chosen {
     Colour(Box<TrackedDetector>),
     Learned(Box<LearnedDetector>),
+    Motion(Box<MotionDetector>),
 }
 
 impl Chosen {
@@ -143,6 +147,9 @@ impl Chosen {
         Ok(match (config.kind, config.yolo) {
             (DetectorKind::Yolo, Some(yolo)) => {
                 Chosen::Learned(Box::new(LearnedDetector::new(yolo, flow_controlled)?))
+            }
+            (DetectorKind::Motion, _) => {
+                Chosen::Motion(Box::new(MotionDetector::new(config.motion)?))
             }
             _ => Chosen::Colour(Box::new(TrackedDetector::new(config.colour)?)),
         })
@@ -198,6 +205,11 @@ impl Detecting {
             ),
             // The learned detector is not gated by the filter's prediction yet.
             Chosen::Learned(d) => d.detect(uav, &mat),
+            Chosen::Motion(d) => d.detect(
+                uav,
+                &mat,
+                gate_of(&self.predictions, &header, &self.gate_config, stats),
+            ),
         });
         let found = match detected {
             Ok(Ok(d)) => d,
@@ -238,6 +250,13 @@ impl Detecting {
                 if let Some(mean) = counts.model_us.checked_div(counts.model_runs) {
                     stats.record("model", mean);
                 }
+            }
+            Chosen::Motion(d) => {
+                let counts = d.take_counts();
+                stats.count("movers", counts.movers);
+                stats.count("no_ground", counts.no_ground);
+                stats.count("acquired", counts.acquired);
+                stats.count("track_lost", counts.track_lost);
             }
         }
         if let Some(d) = found {

@@ -69,6 +69,9 @@ pub struct VehicleBox {
     pub length_m: f64,
     pub width_m: f64,
     pub height_m: f64,
+    /// The top's colour (BGR), the sides the same darkened; `None`: the target's red
+    /// ([`VEHICLE_TOP_BGR`], [`VEHICLE_SIDE_BGR`]).
+    pub top_bgr: Option<[u8; 3]>,
 }
 
 impl VehicleBox {
@@ -114,8 +117,11 @@ enum Material {
         axis: [f64; 2],
         light: f32,
     },
-    VehicleTop,
+    VehicleTop {
+        bgr: [u8; 3],
+    },
     VehicleSide {
+        bgr: [u8; 3],
         light: f32,
     },
     TrafficTop {
@@ -212,7 +218,7 @@ impl Renderer {
             i => match self.faces[i as usize].material {
                 Material::Roof { .. } => Surface::Roof,
                 Material::Wall { .. } => Surface::Wall,
-                Material::VehicleTop => Surface::VehicleTop,
+                Material::VehicleTop { .. } => Surface::VehicleTop,
                 Material::VehicleSide { .. } => Surface::VehicleSide,
                 Material::TrafficTop { .. } | Material::TrafficSide { .. } => Surface::Traffic,
             },
@@ -271,8 +277,13 @@ impl Renderer {
             }
         }
         if let Some(v) = vehicle {
-            self.push_box(v, zg, cam, Material::VehicleTop, |light| {
-                Material::VehicleSide { light }
+            let (top, side) = match v.top_bgr {
+                None => (VEHICLE_TOP_BGR, VEHICLE_SIDE_BGR),
+                // Darkened as the red's sides are (140/214), like the traffic's.
+                Some(bgr) => (bgr, bgr.map(|c| (f32::from(c) * 0.65).round() as u8)),
+            };
+            self.push_box(v, zg, cam, Material::VehicleTop { bgr: top }, |light| {
+                Material::VehicleSide { bgr: side, light }
             });
         }
     }
@@ -459,8 +470,8 @@ fn shade_face(city: &City, material: &Material, p: Vector3<f64>, zg: f64) -> [f3
                 t[2] * b.tint[2] * light,
             ]
         }
-        Material::VehicleTop => VEHICLE_TOP_BGR.map(f32::from),
-        Material::VehicleSide { light } => VEHICLE_SIDE_BGR.map(|c| c as f32 * light),
+        Material::VehicleTop { bgr } => bgr.map(f32::from),
+        Material::VehicleSide { bgr, light } => bgr.map(|c| c as f32 * light),
         Material::TrafficTop { bgr } => bgr.map(f32::from),
         // Sides darkened like the target's (140/214 of the top), then lit.
         Material::TrafficSide { bgr, light } => bgr.map(|c| c as f32 * 0.65 * light),

@@ -148,6 +148,11 @@ pub struct VehicleSize {
     pub length_m: f64,
     pub width_m: f64,
     pub height_m: f64,
+    /// The target's roof colour (BGR), its sides the same darkened; none: the red the
+    /// colour detector looks for. Another colour is for the learned and motion
+    /// detectors (`[detection] kind`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub colour_bgr: Option<[u8; 3]>,
 }
 
 impl SimConfig {

@@ -177,6 +177,7 @@ impl Simulator {
             length_m: v.length_m,
             width_m: v.width_m,
             height_m: v.height_m,
+            top_bgr: v.colour_bgr,
         };
         let target = vehicle.top_centre(self.config.city.ground_z_m);
         let start = *self.start_s_m.get_or_insert(state.vehicle_s_m);
@@ -195,6 +196,7 @@ impl Simulator {
                         x: p.x + right[0] * car.lane_m,
                         y: p.y + right[1] * car.lane_m,
                         heading,
+                        top_bgr: None,
                         ..vehicle
                     },
                     top_bgr: car.colour_bgr,
@@ -203,7 +205,8 @@ impl Simulator {
             .collect();
         let ground_z = self.config.city.ground_z_m;
         let mut look_alikes = [None; 4];
-        let same_colour = self.traffic.iter().filter(|t| t.top_bgr == VEHICLE_TOP_BGR);
+        let target_bgr = self.config.vehicle.colour_bgr.unwrap_or(VEHICLE_TOP_BGR);
+        let same_colour = self.traffic.iter().filter(|t| t.top_bgr == target_bgr);
         for (slot, t) in look_alikes.iter_mut().zip(same_colour) {
             let p = t.body.top_centre(ground_z);
             *slot = Some([p.x, p.y, p.z]);
