@@ -1,6 +1,6 @@
 //! Benchmark: the detectors on rendered frames, against the simulator's truth pixel.
 //! Per preset (nadir `default`, 30° `tilted`, the tracking `gimbal`): recall (frames
-//! with the target in view where the detector's centre lies within `--hit-px` of the
+//! with the target in view and not hidden where the detector's centre lies within `--hit-px` of the
 //! target's pixel), precision (of its detections, the share that are such hits), the
 //! median centre error of the hits, and the cost per frame (median, p90).
 //!
@@ -24,7 +24,7 @@
 //! Run: `cargo run --release -p dualgeo-bench --bin detectors [-- --seconds 10
 //! --presets default,silver_parked --detectors colour,motion]`
 
-use acquisition::sim::{Presets, Simulator};
+use acquisition::sim::{Presets, SimConfig, Simulator};
 use anyhow::{Context, Result};
 use clap::Parser;
 use detection::motion::{MotionConfig, MotionDetector};
@@ -55,6 +55,20 @@ struct Args {
     /// The model's input size.
     #[arg(long, default_value_t = 416)]
     input_size: i32,
+    /// `[detection.motion]` keys for the motion rows, TOML (e.g. `threshold = 25`).
+    #[arg(long, default_value = "")]
+    motion: String,
+    /// Print, per frame of the left camera, the designated motion detector's movers
+    /// against the truth pixel (stderr).
+    #[arg(long)]
+    trace: bool,
+    /// Seeds per preset (0: the preset itself; more start the route elsewhere and
+    /// draw other noise), pooled in each row.
+    #[arg(long, default_value_t = 1)]
+    seeds: u64,
+    /// The first seed (`--first-seed 2 --seeds 1`: seed 2 alone).
+    #[arg(long, default_value_t = 0)]
+    first_seed: u64,
     /// Which detectors to run: colour, yolo, motion.
     #[arg(long, value_delimiter = ',', default_value = "colour,yolo,motion")]
     detectors: Vec<String>,
@@ -136,95 +150,176 @@ fn yolo(args: &Args, classes: Vec<ClassRef>) -> Result<YoloDetector> {
 
 fn main() -> Result<()> {
     let args = Args::parse();
-    let mut vehicles = yolo(
+    let vehicles = yolo(
         &args,
         ["car", "bus", "truck"]
             .map(|c| ClassRef::Name(c.into()))
             .to_vec(),
     )?;
-    let mut any = yolo(&args, Vec::new())?;
+    let any = yolo(&args, Vec::new())?;
     println!(
         "| preset | detector | frames | recall | precision | wrong | centre error (px, median) | ms per frame (p50 / p90) |"
     );
     println!("| --- | --- | --- | --- | --- | --- | --- | --- |");
     let runs = |d: &str| args.detectors.iter().any(|x| x == d);
+    let motion_config: MotionConfig = toml::from_str(&args.motion).context("--motion")?;
+    let mut models = Models { vehicles, any };
     for preset in &args.presets {
-        let mut config = Presets::builtin().get(preset)?;
-        config.duration_s = args.seconds;
-        let (w, h) = (config.camera.width as i32, config.camera.height as i32);
-        let mut sim = Simulator::new(config)?;
-        let mut colour = TrackedDetector::new(ColourBlobConfig::default())?;
-        let mut motion = MotionDetector::new(MotionConfig::default())?;
-        let mut designated: Option<MotionDetector> = None;
-        // The motion detector looks from the frame 2 × short_gap_frames on; its rows
-        // count from there.
-        let warm_up = 2 * u64::from(MotionConfig::default().short_gap_frames);
-        let (mut m_tally, mut d_tally) = (Tally::default(), Tally::default());
-        let blank = || cv::Mat::new_rows_cols_with_default(h, w, cv::CV_8UC3, cv::Scalar::all(0.0));
-        let mut frames = [blank()?, blank()?];
-        let (mut c_tally, mut y_tally, mut any_tally) =
-            (Tally::default(), Tally::default(), Tally::default());
-        let mut k = 0u64;
-        while let Some(step) = sim.step() {
-            let [l, r] = &mut frames;
-            sim.render_pair(
-                &step,
-                l.data_bytes_mut()?,
-                r.data_bytes_mut()?,
-                3 * w as usize,
-            );
-            for (camera, frame) in frames.iter().enumerate() {
-                let truth = step.frames[camera].target_px;
-                if runs("colour") {
-                    let t = Instant::now();
-                    let found = colour.detect(camera, step.frames[camera].t_s, frame)?;
-                    c_tally.see(truth, found, args.hit_px, t.elapsed().as_secs_f64() * 1e3);
-                }
-                if runs("motion") {
-                    let t = Instant::now();
-                    let found = motion.detect(camera, frame, None)?;
-                    if k >= warm_up {
-                        m_tally.see(truth, found, args.hit_px, t.elapsed().as_secs_f64() * 1e3);
-                    }
-                    let d = designated.get_or_insert_with(|| {
-                        MotionDetector::new(MotionConfig::default()).expect("default config")
-                    });
-                    // The operator's click when the detector first looks.
-                    if k == warm_up {
-                        if let Some(px) = truth {
-                            d.designate(camera, px);
-                        }
-                    }
-                    {
-                        let t = Instant::now();
-                        let found = d.detect(camera, frame, None)?;
-                        if k >= warm_up {
-                            d_tally.see(truth, found, args.hit_px, t.elapsed().as_secs_f64() * 1e3);
-                        }
-                    }
-                }
-                if runs("yolo") && k.is_multiple_of(args.yolo_every.max(1)) {
-                    let t = Instant::now();
-                    let found = vehicles.detect(frame)?;
-                    y_tally.see(truth, found, args.hit_px, t.elapsed().as_secs_f64() * 1e3);
-                    let t = Instant::now();
-                    let found = any.detect(frame)?;
-                    any_tally.see(truth, found, args.hit_px, t.elapsed().as_secs_f64() * 1e3);
-                }
-            }
-            k += 1;
+        let mut t = Tallies::default();
+        for seed in args.first_seed..args.first_seed + args.seeds.max(1) {
+            let mut config = Presets::builtin().get(preset)?;
+            config.duration_s = args.seconds;
+            fly(
+                seeded(config, seed),
+                &args,
+                motion_config,
+                &mut models,
+                &mut t,
+            )?;
         }
         if runs("colour") {
-            c_tally.row("colour", preset);
+            t.colour.row("colour", preset);
         }
         if runs("yolo") {
-            y_tally.row("yolo (car, bus, truck)", preset);
-            any_tally.row("yolo (any class)", preset);
+            t.yolo.row("yolo (car, bus, truck)", preset);
+            t.any.row("yolo (any class)", preset);
         }
         if runs("motion") {
-            m_tally.row("motion (centre)", preset);
-            d_tally.row("motion (designated)", preset);
+            t.centre.row("motion (centre)", preset);
+            t.designated.row("motion (designated)", preset);
         }
     }
     Ok(())
+}
+
+struct Models {
+    vehicles: YoloDetector,
+    any: YoloDetector,
+}
+
+#[derive(Default)]
+struct Tallies {
+    colour: Tally,
+    yolo: Tally,
+    any: Tally,
+    centre: Tally,
+    designated: Tally,
+}
+
+/// Seed 0 is the preset itself; seed `s` > 0 starts the route up to 150 m further on and
+/// draws other navigation noise (as the Monte Carlo varies a scene).
+fn seeded(mut config: SimConfig, seed: u64) -> SimConfig {
+    if seed > 0 {
+        let h = splitmix(config.seed ^ splitmix(seed));
+        config.seed = h;
+        config.driving.start_m += 150.0 * ((splitmix(h ^ 1) >> 11) as f64 / (1u64 << 53) as f64);
+    }
+    config
+}
+
+fn splitmix(mut x: u64) -> u64 {
+    x = x.wrapping_add(0x9e37_79b9_7f4a_7c15);
+    x = (x ^ (x >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+    x = (x ^ (x >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+    x ^ (x >> 31)
+}
+
+/// Flies one seed of a preset through the chosen detectors, into `t`.
+fn fly(
+    config: SimConfig,
+    args: &Args,
+    motion_config: MotionConfig,
+    models: &mut Models,
+    t: &mut Tallies,
+) -> Result<()> {
+    let runs = |d: &str| args.detectors.iter().any(|x| x == d);
+    let (w, h) = (config.camera.width as i32, config.camera.height as i32);
+    let mut sim = Simulator::new(config)?;
+    let mut colour = TrackedDetector::new(ColourBlobConfig::default())?;
+    let mut motion = MotionDetector::new(motion_config)?;
+    let mut designated = MotionDetector::new(motion_config)?;
+    // The motion detector looks from the frame 2 × short_gap_frames on; its rows count
+    // from there.
+    let warm_up = 2 * u64::from(motion_config.short_gap_frames);
+    let blank = || cv::Mat::new_rows_cols_with_default(h, w, cv::CV_8UC3, cv::Scalar::all(0.0));
+    let mut frames = [blank()?, blank()?];
+    let ms = |t: Instant| t.elapsed().as_secs_f64() * 1e3;
+    let mut k = 0u64;
+    while let Some(step) = sim.step() {
+        let [l, r] = &mut frames;
+        sim.render_pair(
+            &step,
+            l.data_bytes_mut()?,
+            r.data_bytes_mut()?,
+            3 * w as usize,
+        );
+        for (camera, frame) in frames.iter().enumerate() {
+            // The truth pixel when the target is in view and not hidden (the bridge).
+            let uav = step.frames[camera].uav;
+            let truth = step.frames[camera]
+                .target_px
+                .filter(|_| sim.target_visible(&step, uav));
+            if runs("colour") {
+                let start = Instant::now();
+                let found = colour.detect(camera, step.frames[camera].t_s, frame)?;
+                t.colour.see(truth, found, args.hit_px, ms(start));
+            }
+            if runs("motion") {
+                let start = Instant::now();
+                let found = motion.detect(camera, frame, None)?;
+                if k >= warm_up {
+                    t.centre.see(truth, found, args.hit_px, ms(start));
+                }
+                // The operator's click when the detector first looks.
+                if k == warm_up {
+                    if let Some(px) = truth {
+                        designated.designate(camera, px);
+                    }
+                }
+                let start = Instant::now();
+                let found = designated.detect(camera, frame, None)?;
+                let cost = ms(start);
+                if args.trace && camera == 0 {
+                    let c = designated.take_counts();
+                    if c.no_ground > 0 {
+                        eprintln!("frame {k}: the ground's motion was not measured");
+                    }
+                    trace(k, truth, found, &designated);
+                }
+                if k >= warm_up {
+                    t.designated.see(truth, found, args.hit_px, cost);
+                }
+            }
+            if runs("yolo") && k.is_multiple_of(args.yolo_every.max(1)) {
+                let start = Instant::now();
+                let found = models.vehicles.detect(frame)?;
+                t.yolo.see(truth, found, args.hit_px, ms(start));
+                let start = Instant::now();
+                let found = models.any.detect(frame)?;
+                t.any.see(truth, found, args.hit_px, ms(start));
+            }
+        }
+        k += 1;
+    }
+    Ok(())
+}
+
+/// One line per frame of the designated motion detector's left camera (`--trace`).
+fn trace(k: u64, truth: Option<[f64; 2]>, found: Option<Detection>, d: &MotionDetector) {
+    let near = |c: [f64; 2]| truth.map_or(f64::NAN, |t| (c[0] - t[0]).hypot(c[1] - t[1]));
+    let round = |p: [f64; 2]| [p[0].round(), p[1].round()];
+    eprintln!(
+        "frame {k}: truth {:?} track (image, ground, missed) {:?} found at {:.1} px {:?}; movers (distance, area) {:?}",
+        truth.map(round),
+        d.track_state(0).map(|([a, b], n)| (round(a), round(b), n)),
+        found.map_or(f64::NAN, |f| near(f.centre)),
+        found.zip(truth).map(|(f, t)| [
+            (f.centre[0] - t[0]) as f32,
+            (f.centre[1] - t[1]) as f32
+        ]),
+        d.last_movers()
+            .iter()
+            .map(|m| (near(m.centre).round(), m.area_px))
+            .collect::<Vec<_>>()
+    );
 }

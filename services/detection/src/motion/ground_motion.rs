@@ -20,6 +20,10 @@ const MAX_CORNERS: i32 = 200;
 const CORNER_SPACING_PX: f64 = 8.0;
 /// Fewer RANSAC inliers than this: no homography (the frame pair is not registered).
 const MIN_INLIERS: i32 = 20;
+/// KLT's pyramid levels above the image: a 15-pixel window follows up to ~100 small
+/// pixels of motion at 4 (a UAV's pitch that steps 12° between frames moves a
+/// 320-pixel-wide image ~60 pixels).
+const PYRAMID_LEVELS: i32 = 4;
 /// RANSAC's inlier threshold, small-image pixels.
 const RANSAC_PX: f64 = 1.0;
 
@@ -61,7 +65,18 @@ impl GroundMotion {
                         0.04,
                     )?;
                 }
-                self.follow(previous, grey, seed)?
+                let corners = self.corners.clone();
+                match self.follow(previous, grey, seed, None)? {
+                    Some(h) => Some(h),
+                    // A jump beyond KLT's reach (a UAV's attitude stepping between
+                    // frames): the whole image's shift by phase correlation starts the
+                    // corners off, once.
+                    None => {
+                        let shift = self.global_shift(previous, grey)?;
+                        self.corners = corners;
+                        self.follow(previous, grey, seed, Some(shift))?
+                    }
+                }
             }
             _ => {
                 self.corners.clear();
@@ -78,14 +93,36 @@ impl GroundMotion {
         Ok(result)
     }
 
+    /// The whole frame's translation from `previous` to `grey`, small-image pixels.
+    fn global_shift(&mut self, previous: &cv::Mat, grey: &cv::Mat) -> opencv::Result<[f32; 2]> {
+        let (mut a, mut b) = (cv::Mat::default(), cv::Mat::default());
+        previous.convert_to(&mut a, cv::CV_32F, 1.0, 0.0)?;
+        grey.convert_to(&mut b, cv::CV_32F, 1.0, 0.0)?;
+        let mut window = cv::Mat::default();
+        opencv::imgproc::create_hanning_window(&mut window, grey.size()?, cv::CV_32F)?;
+        let p = opencv::imgproc::phase_correlate(&a, &b, &window, None)?;
+        Ok([p.x as f32, p.y as f32])
+    }
+
+    /// Follows the corners from `previous` into `grey` (starting them at `shift` when
+    /// given) and fits the homography; the inliers are kept for the next frame.
     fn follow(
         &mut self,
         previous: &cv::Mat,
         grey: &cv::Mat,
         seed: u64,
+        shift: Option<[f32; 2]>,
     ) -> opencv::Result<Option<Matrix3<f64>>> {
         if self.corners.len() < 4 {
             return Ok(None);
+        }
+        let mut flags = 0;
+        if let Some([dx, dy]) = shift {
+            self.next.clear();
+            for p in &self.corners {
+                self.next.push(cv::Point2f::new(p.x + dx, p.y + dy));
+            }
+            flags = opencv::video::OPTFLOW_USE_INITIAL_FLOW;
         }
         let criteria =
             cv::TermCriteria::new(cv::TermCriteria_COUNT + cv::TermCriteria_EPS, 20, 0.03)?;
@@ -97,9 +134,9 @@ impl GroundMotion {
             &mut self.status,
             &mut self.error,
             cv::Size::new(15, 15),
-            3,
+            PYRAMID_LEVELS,
             criteria,
-            0,
+            flags,
             1e-4,
         )?;
         let (mut from, mut to) = (cv::Vector::<cv::Point2f>::new(), cv::Vector::new());

@@ -69,6 +69,9 @@ pub struct MotionConfig {
     /// is acquired again nearest the centre (or [`MotionDetector::designate`]).
     pub acquire_px: Option<[[f64; 2]; 2]>,
     pub acquire_radius_px: f64,
+    /// A mover is the track's only if its mean colour is within this of the track's
+    /// in every channel (a white car beside a silver one is not it).
+    pub colour_tolerance: f64,
 }
 
 impl Default for MotionConfig {
@@ -78,12 +81,13 @@ impl Default for MotionConfig {
             short_gap_frames: 10,
             long_gap_frames: 30,
             threshold: 30.0,
-            min_side_px: 6,
-            min_area_px: 48,
+            min_side_px: 4,
+            min_area_px: 32,
             track_radius_px: 30.0,
             coast_frames: 15,
             acquire_px: None,
             acquire_radius_px: 60.0,
+            colour_tolerance: 25.0,
         }
     }
 }
@@ -104,9 +108,10 @@ impl MotionConfig {
             || self.threshold > 255.0
             || !positive(self.track_radius_px)
             || !positive(self.acquire_radius_px)
+            || !positive(self.colour_tolerance)
         {
             return Err(
-                "threshold must be in (0, 255], track_radius_px and acquire_radius_px > 0".into(),
+                "threshold must be in (0, 255]; track_radius_px, acquire_radius_px and colour_tolerance > 0".into(),
             );
         }
         if self
@@ -132,14 +137,98 @@ pub struct MotionCounts {
     pub track_lost: u64,
 }
 
-/// One camera's track: where the target was in the newest frame it was found, and
-/// how it moves against the ground (pixels per frame).
+/// One camera's track: where the target was last found, that place carried since by
+/// the ground's motion, and how it moves per frame in the image and against the ground.
+/// Two predictions, because either model can fail: a ground homography fitted to roofs
+/// carries a point wrongly, and a camera that slews moves everything in the image.
 #[derive(Debug, Clone, Copy)]
 struct Track {
     centre: [f64; 2],
-    velocity: [f64; 2],
+    carried: [f64; 2],
+    image_velocity: [f64; 2],
+    ground_velocity: [f64; 2],
     missed: u32,
+    /// Its mean colour, smoothed, and when the track started: a mover matches when
+    /// it is near either (wrong picks cannot drag the colour away from the target's).
+    bgr: [f64; 3],
+    first_bgr: [f64; 3],
+    /// The camera's ground was lost since it was last found (the camera jumped): the
+    /// predictions no longer hold, so it is looked for as at an acquisition.
+    blind: bool,
 }
+
+impl Track {
+    fn new(m: &Mover) -> Self {
+        Self {
+            centre: m.centre,
+            carried: m.centre,
+            image_velocity: [0.0; 2],
+            ground_velocity: [0.0; 2],
+            missed: 0,
+            bgr: m.bgr,
+            first_bgr: m.bgr,
+            blind: false,
+        }
+    }
+
+    /// How far `m`'s colour is from the track's (now or at its start, the nearer): the
+    /// largest channel difference.
+    fn colour_distance(&self, m: &Mover) -> f64 {
+        let far = |bgr: &[f64; 3]| {
+            (0..3)
+                .map(|i| (bgr[i] - m.bgr[i]).abs())
+                .fold(0.0, f64::max)
+        };
+        far(&self.bgr).min(far(&self.first_bgr))
+    }
+
+    /// Where it should be in this frame: in the image, and against the ground. Over a
+    /// gap the velocities carry it at most [`EXTRAPOLATE_FRAMES`] frames: a velocity is
+    /// a guess, and a long extrapolation of a wrong one runs away.
+    fn predictions(&self) -> [[f64; 2]; 2] {
+        let n = (self.missed + 1).min(EXTRAPOLATE_FRAMES) as f64;
+        [
+            [
+                self.centre[0] + n * self.image_velocity[0],
+                self.centre[1] + n * self.image_velocity[1],
+            ],
+            [
+                self.carried[0] + n * self.ground_velocity[0],
+                self.carried[1] + n * self.ground_velocity[1],
+            ],
+        ]
+    }
+
+    /// Found again as `m`. An α–β filter: each velocity moves by [`VELOCITY_GAIN`] of
+    /// the prediction's miss, clamped to [`MAX_VELOCITY_STEP_PX`], and only when the
+    /// previous frame found it too (a pick after a gap may be wrong, and would teach a
+    /// wrong velocity that the next gap extrapolates).
+    fn found(&mut self, m: &Mover) {
+        let at = m.centre;
+        if self.missed == 0 {
+            let [image, ground] = self.predictions();
+            let step =
+                |miss: f64| VELOCITY_GAIN * miss.clamp(-MAX_VELOCITY_STEP_PX, MAX_VELOCITY_STEP_PX);
+            for i in 0..2 {
+                self.image_velocity[i] += step(at[i] - image[i]);
+                self.ground_velocity[i] += step(at[i] - ground[i]);
+            }
+        }
+        for i in 0..3 {
+            self.bgr[i] = 0.8 * self.bgr[i] + 0.2 * m.bgr[i];
+        }
+        self.centre = at;
+        self.carried = at;
+        self.missed = 0;
+        self.blind = false;
+    }
+}
+
+/// A coasting track's velocities carry it at most this many frames.
+const EXTRAPOLATE_FRAMES: u32 = 8;
+/// The α–β filter's velocity gain, and the largest miss it learns from, pixels.
+const VELOCITY_GAIN: f64 = 0.3;
+const MAX_VELOCITY_STEP_PX: f64 = 4.0;
 
 #[derive(Default)]
 struct Camera {
@@ -232,6 +321,9 @@ impl MotionDetector {
                     self.counts.no_ground += 1;
                 }
                 history.clear();
+                if let Some(t) = &mut cam.track {
+                    t.blind = true;
+                }
                 None
             }
         };
@@ -242,17 +334,18 @@ impl MotionDetector {
             }
             None => cam.previous = Some((cam.small.try_clone()?, frame.try_clone()?)),
         }
-        // The track's prediction: carried by the ground, plus its own motion.
-        let predicted = match (cam.track, moved) {
-            (Some(t), Some(h)) => {
-                let p = h * Vector3::new(t.centre[0], t.centre[1], 1.0);
-                Some([p.x / p.z + t.velocity[0], p.y / p.z + t.velocity[1]])
+        // The track's last place, carried by the ground's motion (kept when the ground
+        // was not measured this frame).
+        if let (Some(t), Some(h)) = (&mut cam.track, moved) {
+            let p = h * Vector3::new(t.carried[0], t.carried[1], 1.0);
+            if p.z.abs() > 1e-9 {
+                t.carried = [p.x / p.z, p.y / p.z];
             }
-            _ => None,
-        };
+        }
         let k = c.short_gap_frames as usize;
         let (Some(near), Some(far)) = (history.back(k), history.back(2 * k)) else {
-            cam.track = None;
+            // Not enough frames behind (the start, or the ground was lost): the track
+            // waits, and a lost one is looked for where it was.
             return Ok(None);
         };
         let small_h = |h: &Matrix3<f64>| to_small * h * to_full;
@@ -281,16 +374,25 @@ impl MotionDetector {
                 .min_by(|a, b| distance(a, p).total_cmp(&distance(b, p)))
                 .copied()
         };
-        let picked = match (gate, predicted) {
+        let picked = match (gate, cam.track) {
             (Some(g), _) => nearest(g.centre, &|m| g.contains(m.centre)),
-            (None, Some(p)) => {
-                let missed = cam.track.map_or(0, |t| t.missed);
-                let radius = if missed > c.coast_frames {
-                    2.0 * c.track_radius_px
+            (None, Some(t)) => {
+                // The radius holds for `coast_frames`, then grows to 3× (a car beside
+                // the target must not take over after a few frames' gap).
+                let coast = c.coast_frames.max(1);
+                let radius = if t.blind {
+                    c.acquire_radius_px
                 } else {
                     c.track_radius_px
+                        * (1.0 + t.missed.saturating_sub(coast) as f64 / coast as f64).min(3.0)
                 };
-                nearest(p, &|m| distance(m, p) <= radius)
+                let [a, b] = t.predictions();
+                let to_track = |m: &Mover| distance(m, a).min(distance(m, b));
+                self.movers
+                    .iter()
+                    .filter(|m| to_track(m) <= radius && t.colour_distance(m) <= c.colour_tolerance)
+                    .min_by(|x, y| to_track(x).total_cmp(&to_track(y)))
+                    .copied()
             }
             (None, None) => {
                 let m = match cam.designated {
@@ -304,48 +406,37 @@ impl MotionDetector {
                 m
             }
         };
-        let outlined = match (picked, history.back(c.long_gap_frames as usize)) {
-            (Some(m), Some(old)) => self
-                .differencer
-                .outline(
+        // The outline from `long_gap_frames` back, or where that frame did not see the
+        // mover (the camera turned), from `2 × short_gap_frames` back; the blob itself
+        // when neither outlines it.
+        let mut outlined = picked;
+        if let Some(m) = picked {
+            for gap in [c.long_gap_frames, 2 * c.short_gap_frames] {
+                let Some(old) = history.back(gap as usize) else {
+                    continue;
+                };
+                let outline = self.differencer.outline(
                     frame,
                     (&old.full, &old.to_now),
                     &m,
                     c.threshold,
                     c.min_area_px as i32 / 2,
-                )?
-                .or(Some(m)),
-            (m, _) => m,
-        };
-        match (outlined, cam.track) {
-            (Some(m), previous) => {
-                let velocity = match (previous, predicted) {
-                    // Its own motion: where it is against where the ground took it.
-                    (Some(t), Some(p)) => {
-                        let carried = [p[0] - t.velocity[0], p[1] - t.velocity[1]];
-                        let v = [m.centre[0] - carried[0], m.centre[1] - carried[1]];
-                        [0.5 * (t.velocity[0] + v[0]), 0.5 * (t.velocity[1] + v[1])]
-                    }
-                    _ => [0.0, 0.0],
-                };
-                cam.track = Some(Track {
-                    centre: m.centre,
-                    velocity,
-                    missed: 0,
-                });
+                )?;
+                if outline.is_some() {
+                    outlined = outline;
+                    break;
+                }
             }
+        }
+        match (outlined, &mut cam.track) {
+            (Some(m), Some(t)) => t.found(&m),
+            (Some(m), None) => cam.track = Some(Track::new(&m)),
+            (None, Some(t)) if t.missed < 4 * c.coast_frames => t.missed += 1,
             (None, Some(t)) => {
-                cam.track = match predicted {
-                    Some(p) if t.missed < 4 * c.coast_frames => Some(Track {
-                        centre: p,
-                        missed: t.missed + 1,
-                        ..t
-                    }),
-                    _ => {
-                        self.counts.track_lost += 1;
-                        None
-                    }
-                };
+                // Dropped: the next mover near where it should be is taken for it.
+                self.counts.track_lost += 1;
+                cam.designated = Some(t.predictions()[0]);
+                cam.track = None;
             }
             (None, None) => {}
         }
@@ -363,6 +454,19 @@ impl MotionDetector {
             cam.track = None;
             cam.designated = Some(px);
         }
+    }
+
+    /// The movers of the last frame looked at (for diagnostics: `bench --bin detectors
+    /// --trace`).
+    pub fn last_movers(&self) -> &[Mover] {
+        &self.movers
+    }
+
+    /// `camera`'s track: its two predictions for the next frame (image, ground) and
+    /// the frames it has missed (for diagnostics).
+    pub fn track_state(&self, camera: usize) -> Option<([[f64; 2]; 2], u32)> {
+        let t = self.cameras.get(camera)?.track?;
+        Some((t.predictions(), t.missed))
     }
 
     /// The counts since the last call, and starts again from zero.

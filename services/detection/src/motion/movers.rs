@@ -34,14 +34,16 @@ pub struct Mover {
     /// Left, top, width, height.
     pub bbox: [f64; 4],
     pub area_px: f64,
+    /// Its mean colour (BGR) in the newest frame: how a track tells it from another
+    /// mover.
+    pub bgr: [f64; 3],
 }
 
 /// Reusable buffers for the differences.
 #[derive(Default)]
 pub struct Differencer {
     warped: cv::Mat,
-    valid: cv::Mat,
-    ones: cv::Mat,
+    scratch: cv::Mat,
     high: cv::Mat,
     low: cv::Mat,
     above: cv::Mat,
@@ -65,8 +67,8 @@ fn to_cv(m: &Matrix3<f64>) -> opencv::Result<cv::Mat> {
 
 impl Differencer {
     /// How much `now` differs from `old` warped by `h` (old pixels → `now`'s pixels, the
-    /// window's origin included), per pixel, into `self.diff[slot]`; 0 where the old frame
-    /// does not reach.
+    /// window's origin included), per pixel, into `self.diff[slot]`. Where the old frame
+    /// does not reach, its border is replicated: [`covered`] keeps blobs there out.
     fn difference(
         &mut self,
         now: &cv::Mat,
@@ -91,32 +93,21 @@ impl Differencer {
         cv::subtract_def(now, &self.high, &mut self.above)?;
         cv::subtract_def(&self.low, now, &mut self.below)?;
         cv::max(&self.above, &self.below, &mut self.high)?;
+        // The largest channel: a change in any colour counts.
         cv::split(&self.high, &mut self.channels)?;
         let out = &mut self.diff[slot];
-        self.channels.get(0)?.copy_to(out)?;
-        for c in 1..self.channels.len() {
-            let channel = self.channels.get(c)?;
-            let mut tmp = cv::Mat::default();
-            cv::max(&*out, &channel, &mut tmp)?;
-            *out = tmp;
+        match self.channels.len() {
+            3 => {
+                let (b, g, r) = (
+                    self.channels.get(0)?,
+                    self.channels.get(1)?,
+                    self.channels.get(2)?,
+                );
+                cv::max(&b, &g, &mut self.scratch)?;
+                cv::max(&self.scratch, &r, out)?;
+            }
+            _ => self.channels.get(0)?.copy_to(out)?,
         }
-        // Where the old frame does not reach (the replicated border), nothing changed.
-        if self.ones.size()? != old.size()? {
-            self.ones = cv::Mat::new_size_with_default(old.size()?, cv::CV_8UC1, 255.into())?;
-        }
-        opencv::imgproc::warp_perspective(
-            &self.ones,
-            &mut self.valid,
-            &m,
-            size,
-            opencv::imgproc::INTER_NEAREST,
-            cv::BORDER_CONSTANT,
-            cv::Scalar::default(),
-        )?;
-        opencv::imgproc::erode_def(&self.valid.clone(), &mut self.valid, &kernel)?;
-        let mut masked = cv::Mat::default();
-        cv::bitwise_and_def(&*out, &self.valid, &mut masked)?;
-        *out = masked;
         Ok(())
     }
 
@@ -153,20 +144,57 @@ impl Differencer {
             if w.min(h) < min_side || area < min_area {
                 continue;
             }
+            let corners = [
+                [x as f64, y as f64],
+                [(x + w - 1) as f64, (y + h - 1) as f64],
+                [x as f64, (y + h - 1) as f64],
+                [(x + w - 1) as f64, y as f64],
+            ];
+            let seen_by = |old: &cv::Mat, h: &Matrix3<f64>| -> opencv::Result<bool> {
+                let size = old.size()?;
+                Ok(corners.iter().all(|p| covered(h, size, *p)))
+            };
+            if !seen_by(near, near_h)? || !seen_by(far, far_h)? {
+                continue;
+            }
             let c = to_full
                 * Vector3::new(
                     *self.centroids.at_2d::<f64>(i, 0)?,
                     *self.centroids.at_2d::<f64>(i, 1)?,
                     1.0,
                 );
+            let bgr = self.mean_colour(now, i, [x, y, w, h])?;
             // Small pixel x covers full pixels s·x ..= s·x + s − 1.
             out.push(Mover {
+                bgr,
                 centre: [c.x, c.y],
                 bbox: [x as f64 * s, y as f64 * s, w as f64 * s, h as f64 * s],
                 area_px: area as f64 * s * s,
             });
         }
         Ok(())
+    }
+
+    /// The mean colour of `image` over the pixels labelled `label` inside `bbox`.
+    fn mean_colour(
+        &self,
+        image: &cv::Mat,
+        label: i32,
+        [x, y, w, h]: [i32; 4],
+    ) -> opencv::Result<[f64; 3]> {
+        let (mut sum, mut n) = ([0.0; 3], 0.0f64);
+        for v in y..y + h {
+            for u in x..x + w {
+                if *self.labels.at_2d::<i32>(v, u)? == label {
+                    let p = image.at_2d::<cv::Vec3b>(v, u)?;
+                    for (s, c) in sum.iter_mut().zip(p.0) {
+                        *s += c as f64;
+                    }
+                    n += 1.0;
+                }
+            }
+        }
+        Ok(sum.map(|s| s / n.max(1.0)))
     }
 
     /// Thresholds `self.both`, closes one-pixel gaps and labels the blobs; the count
@@ -233,6 +261,10 @@ impl Differencer {
                 *self.centroids.at_2d::<f64>(i, 1)?,
             );
             let d = (cx - mx).hypot(cy - my);
+            let at = [cx + x0 as f64, cy + y0 as f64];
+            if !covered(old_h, old.size()?, at) {
+                continue;
+            }
             if best.is_none_or(|(b, _)| d < b) {
                 best = Some((d, i));
             }
@@ -248,7 +280,8 @@ impl Differencer {
             stat(opencv::imgproc::CC_STAT_HEIGHT)?,
         ];
         let area = stat(opencv::imgproc::CC_STAT_AREA)?;
-        let centre = top_centre(&window, &self.labels, label)?.unwrap_or([
+        let label_box = [0, 1, 2, 3].map(|i| bbox[i] as i32 - [x0, y0, 0, 0][i]);
+        let centre = top_centre(&window, &self.labels, label, label_box)?.unwrap_or([
             *self.centroids.at_2d::<f64>(label, 0)?,
             *self.centroids.at_2d::<f64>(label, 1)?,
         ]);
@@ -256,21 +289,42 @@ impl Differencer {
             centre: [centre[0] + x0 as f64, centre[1] + y0 as f64],
             bbox,
             area_px: area,
+            bgr: mover.bgr,
         }))
     }
+}
+
+/// Whether the pixel `p` of the newest frame was seen by an old frame of `size` that
+/// `h` maps onto it, 2 pixels inside its border (outside, the warp replicated the
+/// border and any difference there is not motion).
+fn covered(h: &Matrix3<f64>, size: cv::Size, p: [f64; 2]) -> bool {
+    let Some(back) = h.try_inverse() else {
+        return false;
+    };
+    let q = back * Vector3::new(p[0], p[1], 1.0);
+    if q.z.abs() < 1e-12 {
+        return false;
+    }
+    let (u, v) = (q.x / q.z, q.y / q.z);
+    u >= 2.0 && v >= 2.0 && u <= size.width as f64 - 3.0 && v <= size.height as f64 - 3.0
 }
 
 /// Smallest brightness step between a box's top and its sides that the split trusts.
 const MIN_TOP_STEP: f64 = 20.0;
 
-/// The centroid of the brighter part of the blob `label` of `labels` (brightness: the
-/// largest channel of `window`), split at Otsu's threshold, when the two parts' means
+/// The centroid of the brighter part of the blob `label` of `labels`, inside its
+/// bounding box (left, top, width, height) (brightness: the largest channel of `window`), split at Otsu's threshold, when the two parts' means
 /// differ by at least [`MIN_TOP_STEP`] and the brighter one holds at least 30 % of the
 /// blob; window coordinates.
-fn top_centre(window: &cv::Mat, labels: &cv::Mat, label: i32) -> opencv::Result<Option<[f64; 2]>> {
-    let mut pixels: Vec<(i32, i32, u8)> = Vec::new();
-    for y in 0..labels.rows() {
-        for x in 0..labels.cols() {
+fn top_centre(
+    window: &cv::Mat,
+    labels: &cv::Mat,
+    label: i32,
+    [bx, by, bw, bh]: [i32; 4],
+) -> opencv::Result<Option<[f64; 2]>> {
+    let mut pixels: Vec<(i32, i32, u8)> = Vec::with_capacity((bw * bh).max(0) as usize);
+    for y in by..by + bh {
+        for x in bx..bx + bw {
             if *labels.at_2d::<i32>(y, x)? == label {
                 let p = window.at_2d::<cv::Vec3b>(y, x)?;
                 pixels.push((x, y, p[0].max(p[1]).max(p[2])));
@@ -332,6 +386,111 @@ pub fn otsu(values: impl Iterator<Item = u8>) -> Option<u8> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A 320 × 240 random texture (blurred), shifted by `shift` pixels, with a grey
+    /// square at `square` (top-left) drawn over it.
+    fn scene(shift: f64, square: Option<(i32, i32)>) -> cv::Mat {
+        let mut rng = 99u64;
+        let mut img = cv::Mat::new_rows_cols_with_default(240, 320, cv::CV_8UC3, 0.into()).unwrap();
+        for y in 0..240 {
+            for x in 0..320 {
+                rng = rng
+                    .wrapping_mul(6364136223846793005)
+                    .wrapping_add(1442695040888963407);
+                let v = 60 + (rng >> 58) as u8 * 2;
+                *img.at_2d_mut::<cv::Vec3b>(y, x).unwrap() = cv::Vec3b::from([v, v, v]);
+            }
+        }
+        let mut blurred = cv::Mat::default();
+        opencv::imgproc::gaussian_blur_def(&img, &mut blurred, cv::Size::new(5, 5), 1.2).unwrap();
+        let m = cv::Mat::from_slice_2d(&[[1.0f64, 0.0, shift], [0.0, 1.0, 0.0]]).unwrap();
+        let mut out = cv::Mat::default();
+        opencv::imgproc::warp_affine(
+            &blurred,
+            &mut out,
+            &m,
+            blurred.size().unwrap(),
+            opencv::imgproc::INTER_LINEAR,
+            cv::BORDER_REFLECT,
+            cv::Scalar::default(),
+        )
+        .unwrap();
+        if let Some((x, y)) = square {
+            opencv::imgproc::rectangle(
+                &mut out,
+                cv::Rect::new(x, y, 12, 6),
+                cv::Scalar::new(200.0, 200.0, 205.0, 0.0),
+                -1,
+                opencv::imgproc::LINE_8,
+                0,
+            )
+            .unwrap();
+        }
+        out
+    }
+
+    fn shift(dx: f64) -> Matrix3<f64> {
+        Matrix3::new(1.0, 0.0, dx, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0)
+    }
+
+    #[test]
+    fn a_box_moving_over_moving_ground_is_the_only_mover() {
+        // The ground moves 2 px a frame; the box 4 px a frame on top of that; frames 0,
+        // 10 and 20 (the newest). A second box is parked: it moves with the ground.
+        let frame = |k: i32| {
+            let mut f = scene(2.0 * k as f64, Some((100 + 6 * k, 120)));
+            opencv::imgproc::rectangle(
+                &mut f,
+                cv::Rect::new(40 + 2 * k, 60, 12, 6),
+                cv::Scalar::new(200.0, 200.0, 205.0, 0.0),
+                -1,
+                opencv::imgproc::LINE_8,
+                0,
+            )
+            .unwrap();
+            f
+        };
+        let (now, near, far) = (frame(20), frame(10), frame(0));
+        let mut d = Differencer::default();
+        let mut out = Vec::new();
+        d.movers(
+            &now,
+            (&near, &shift(20.0)),
+            (&far, &shift(40.0)),
+            30.0,
+            (3, 12),
+            &Matrix3::identity(),
+            &mut out,
+        )
+        .unwrap();
+        assert_eq!(out.len(), 1, "{out:?}");
+        // The box now spans x 220..232, y 120..126: its part not covered 10 frames
+        // ago (by then at 160..172, carried to 180..192) is all of it.
+        let m = out[0];
+        assert!(
+            (m.centre[0] - 225.5).abs() < 1.0 && (m.centre[1] - 122.5).abs() < 1.0,
+            "{m:?}"
+        );
+        assert!(m.bgr[0] > 150.0, "{m:?}");
+        // Its outline from the far frame is the whole box.
+        let o = d
+            .outline(&now, (&far, &shift(40.0)), &m, 30.0, 20)
+            .unwrap()
+            .unwrap();
+        assert!(
+            (o.centre[0] - 225.5).abs() < 0.3 && (o.centre[1] - 122.5).abs() < 0.3,
+            "{o:?}"
+        );
+    }
+
+    #[test]
+    fn only_pixels_an_old_frame_saw_are_covered() {
+        let size = cv::Size::new(100, 80);
+        assert!(covered(&shift(10.0), size, [50.0, 40.0]));
+        assert!(!covered(&shift(10.0), size, [5.0, 40.0]));
+        assert!(covered(&shift(-10.0), size, [5.0, 40.0]));
+        assert!(!covered(&shift(-10.0), size, [95.0, 40.0]));
+    }
 
     #[test]
     fn otsu_splits_two_levels_between_them() {
