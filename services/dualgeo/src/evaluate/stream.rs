@@ -2,12 +2,17 @@
 //! and the Monte Carlo evaluation need it: the simulator renders each pair, the colour
 //! detector (with its track, gated by the default estimator's prediction as in `run`:
 //! [`SceneStream::observe_estimate`]) finds the target, and each [`Lane`] runs its own
-//! vision chain and estimators on the same pixels. Truth comes along for scoring only; nothing
-//! here gives it to the chain or the estimators.
+//! vision chain and estimators on the same pixels. A scene whose vehicle is not the
+//! colour detector's red is detected by its motion ([`detection::motion`]), and the
+//! stream plays the operator once: when the motion detector first looks, it designates
+//! the target at its true pixel (as `acquire_px` does in `run`). Apart from that
+//! click, truth comes along for scoring only; nothing here gives it to the chain or the
+//! estimators.
 
 use super::video_link::VideoLink;
 use acquisition::sim::{SimConfig, SimStep, Simulator};
 use anyhow::Result;
+use detection::motion::{MotionConfig, MotionDetector};
 use detection::prediction_gate::{self, GateConfig, RecentPredictions, TargetPrediction};
 use detection::{ColourBlobConfig, TrackCounts, TrackedDetector};
 use geolocation::{
@@ -41,10 +46,43 @@ pub struct Pair<'a> {
     pub visible: bool,
 }
 
+/// The detector a scene needs: the colour detector for the red target, the motion
+/// detector for any other, with the pair at which the operator designates the target.
+enum SceneDetector {
+    Colour(Box<TrackedDetector>),
+    Motion(Box<MotionDetector>, u64),
+}
+
+impl SceneDetector {
+    /// For a stream that sees every `every`-th pair: the motion detector's gaps are
+    /// kept in seconds (its defaults' frames at the full rate, divided by `every`).
+    fn for_scene(config: &SimConfig, every: u64) -> Result<Self> {
+        if config.vehicle.colour_bgr.is_none() {
+            return Ok(Self::Colour(Box::new(TrackedDetector::new(
+                ColourBlobConfig::default(),
+            )?)));
+        }
+        let d = MotionConfig::default();
+        let scaled = |frames: u32| (frames as u64 / every).max(1) as u32;
+        let short_gap_frames = scaled(d.short_gap_frames);
+        let motion = MotionConfig {
+            short_gap_frames,
+            long_gap_frames: scaled(d.long_gap_frames).max(short_gap_frames),
+            ..d
+        };
+        // It first looks at the pair 2 × short_gap_frames.
+        let first_look = 2 * u64::from(short_gap_frames);
+        Ok(Self::Motion(
+            Box::new(MotionDetector::new(motion)?),
+            first_look,
+        ))
+    }
+}
+
 /// The scene's renderer, detector and the frame geometry every lane shares.
 pub struct SceneStream {
     sim: Simulator,
-    detector: TrackedDetector,
+    detector: SceneDetector,
     gate: GateConfig,
     predictions: RecentPredictions,
     /// What the detector counted (gated out, re-acquired, ...) over the stream.
@@ -61,6 +99,7 @@ impl SceneStream {
     /// Streams every `every`-th pair of `config`'s route.
     pub fn new(config: SimConfig, every: u64) -> Result<Self> {
         let (w, h) = (config.camera.width as i32, config.camera.height as i32);
+        let detector = SceneDetector::for_scene(&config, every.max(1))?;
         let sim = Simulator::new(config)?;
         let blank = || cv::Mat::new_rows_cols_with_default(h, w, cv::CV_8UC3, cv::Scalar::all(0.0));
         Ok(Self {
@@ -71,7 +110,7 @@ impl SceneStream {
                 height: h as u32,
             },
             sim,
-            detector: TrackedDetector::new(ColourBlobConfig::default())?,
+            detector,
             gate: ColourBlobConfig::default().gate,
             predictions: RecentPredictions::default(),
             detector_counts: TrackCounts::default(),
@@ -159,16 +198,28 @@ impl SceneStream {
                 };
                 prediction_gate::gate_for(&p, &frame, &self.gate)
             });
-            *d = self
-                .detector
-                .detect_gated(i, f.t_s, &self.images[i], gate)?
-                .map(|d| d.centre);
+            *d = match &mut self.detector {
+                SceneDetector::Colour(detector) => detector
+                    .detect_gated(i, f.t_s, &self.images[i], gate)?
+                    .map(|d| d.centre),
+                SceneDetector::Motion(detector, first_look) => {
+                    // The operator's click, once (the pairs this stream sees, from 1).
+                    if self.k / self.every == *first_look + 1 {
+                        if let Some(px) = f.target_px {
+                            detector.designate(i, px);
+                        }
+                    }
+                    detector.detect(i, &self.images[i], gate)?.map(|d| d.centre)
+                }
+            };
         }
-        let c = self.detector.take_counts();
-        let total = &mut self.detector_counts;
-        total.gated_out += c.gated_out;
-        total.reacquired += c.reacquired;
-        total.partial_view_dropped += c.partial_view_dropped;
+        if let SceneDetector::Colour(detector) = &mut self.detector {
+            let c = detector.take_counts();
+            let total = &mut self.detector_counts;
+            total.gated_out += c.gated_out;
+            total.reacquired += c.reacquired;
+            total.partial_view_dropped += c.partial_view_dropped;
+        }
         let visible = [Uav::Left, Uav::Right]
             .iter()
             .all(|&uav| self.sim.target_visible(&step, uav));
@@ -306,5 +357,26 @@ impl Lane {
             counts: self.chain.take_counts(),
             rejections,
         })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use acquisition::sim::Presets;
+
+    #[test]
+    fn a_red_target_gets_the_colour_detector_any_other_the_motion_detector() {
+        let red = Presets::builtin().get("suite_town").unwrap();
+        assert!(matches!(
+            SceneDetector::for_scene(&red, 2).unwrap(),
+            SceneDetector::Colour(_)
+        ));
+        let silver = Presets::builtin().get("tilted45_silver").unwrap();
+        // Every 2nd pair: the gaps halve (10 → 5 frames), so it first looks at pair 10.
+        match SceneDetector::for_scene(&silver, 2).unwrap() {
+            SceneDetector::Motion(_, first_look) => assert_eq!(first_look, 10),
+            SceneDetector::Colour(_) => panic!("a silver car needs the motion detector"),
+        }
     }
 }
