@@ -1,7 +1,8 @@
 //! Plays a recorded flight (as `dualgeo simulate --flight-out` writes it) as if it were
 //! flying: each UAV's video streamed over UDP by the `ffmpeg` CLI (re-encoded as a
 //! low-latency H.264 in MPEG-TS, at its own rate, `-re`), and its MAVLink telemetry sent over UDP at 50 Hz per message type
-//! (ATTITUDE and GLOBAL_POSITION_INT resampled from the log), paced by the wall clock
+//! (ATTITUDE and GLOBAL_POSITION_INT resampled from the log, and
+//! GIMBAL_DEVICE_ATTITUDE_STATUS when the log has a gimbal), paced by the wall clock
 //! from the same start. Shared by tests/e2e_live_flight.rs and the `live_flight` bench.
 
 #![allow(dead_code)] // each includer uses part of it
@@ -82,6 +83,8 @@ pub fn write_live_toml(recorded: &Path, out: &Path, ports: LivePorts) {
 struct Series {
     attitude: Vec<(f64, [f64; 3])>,
     position: Vec<(f64, [f64; 3])>,
+    /// The gimbal's roll, pitch, yaw relative to the body (vehicle frame), if any.
+    gimbal: Vec<(f64, [f64; 3])>,
 }
 
 fn series(log: &Path, system: Option<u8>) -> Series {
@@ -89,6 +92,7 @@ fn series(log: &Path, system: Option<u8>) -> Series {
     let mut s = Series {
         attitude: Vec::new(),
         position: Vec::new(),
+        gimbal: Vec::new(),
     };
     for (sys, sample) in samples {
         if system.is_some_and(|w| w != sys) {
@@ -103,8 +107,16 @@ fn series(log: &Path, system: Option<u8>) -> Series {
                 alt_m,
                 ..
             } => s.position.push((t_s, [lat_deg, lon_deg, alt_m])),
-            // The live flights played here are nadir: no gimbal to send.
-            NavSample::Gimbal { .. } => {}
+            NavSample::Gimbal {
+                t_s,
+                rpy_rad,
+                earth_frame,
+            } => {
+                // The simulator writes the vehicle frame; an earth-frame log is not
+                // played here.
+                assert!(!earth_frame, "earth-frame gimbal logs are not played");
+                s.gimbal.push((t_s, rpy_rad));
+            }
         }
     }
     s
@@ -229,8 +241,9 @@ impl Drop for LiveSender {
     }
 }
 
-/// Sends ATTITUDE and GLOBAL_POSITION_INT at [`TELEMETRY_HZ`] from video time 0
-/// (autopilot time `offset`), each in its own datagram, at `t0 + (t − offset)`.
+/// Sends ATTITUDE and GLOBAL_POSITION_INT (and GIMBAL_DEVICE_ATTITUDE_STATUS when the
+/// log has a gimbal) at [`TELEMETRY_HZ`] from video time 0 (autopilot time `offset`),
+/// each in its own datagram, at `t0 + (t − offset)`.
 fn send(
     s: &Series,
     offset: f64,
@@ -270,6 +283,8 @@ fn send(
             continue;
         }
         let ms = (t * 1e3).round() as u32;
+        let gimbal =
+            at(&s.gimbal, t, true).map(|rpy| acquisition::flight::tlog::gimbal_message(ms, rpy));
         let messages = [
             MavMessage::ATTITUDE(ATTITUDE_DATA {
                 time_boot_ms: ms,
@@ -287,7 +302,7 @@ fn send(
                 ..Default::default()
             }),
         ];
-        for m in &messages {
+        for m in messages.iter().chain(gimbal.as_ref()) {
             buf.clear();
             mavlink::write_versioned_msg(&mut buf, MavlinkVersion::V2, header, m)
                 .expect("encode MAVLink");

@@ -1,0 +1,101 @@
+//! Issue #25, live: a flight with tracking gimbals played as if flying
+//! (tests/support/live_sender.rs also sends each UAV's GIMBAL_DEVICE_ATTITUDE_STATUS,
+//! MAVLink 285, at 50 Hz) into `dualgeo run --source live.toml`. The live source reads
+//! the gimbal's attitude from the stream as the recorded one does from the `.tlog`:
+//! every message arrives, frames get the camera's pose on its gimbal, and pairs become
+//! estimates. Its own binary so that it does not share the CPU with the other live test.
+
+#[path = "support/live_sender.rs"]
+mod live_sender;
+#[path = "support/scratch.rs"]
+mod scratch;
+
+use live_sender::{have_ffmpeg, write_live_toml, LivePorts, LiveSender};
+use scratch::Scratch;
+use serde_json::Value;
+use std::process::{Command, Stdio};
+use std::time::{Duration, Instant};
+
+fn json(path: &std::path::Path) -> Value {
+    serde_json::from_str(&std::fs::read_to_string(path).expect("read json")).expect("json")
+}
+
+#[test]
+fn a_live_gimbal_flight_gives_each_frame_the_camera_on_its_gimbal() {
+    if !have_ffmpeg() {
+        eprintln!("SKIPPED: the ffmpeg CLI is not installed (scripts/setup.sh installs it)");
+        return;
+    }
+    let dir = Scratch::new("live-gimbal");
+    let recorded = dir.join("recorded");
+    let o = Command::new(env!("CARGO_BIN_EXE_dualgeo"))
+        .args([
+            "simulate",
+            "--preset",
+            "gimbal",
+            "--duration-s",
+            "12",
+            "--flight-out",
+        ])
+        .arg(&recorded)
+        .output()
+        .expect("simulate");
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let ports = LivePorts::pick();
+    let live = dir.join("live.toml");
+    write_live_toml(&recorded, &live, ports);
+
+    let out = dir.join("out");
+    let run = Command::new(env!("CARGO_BIN_EXE_dualgeo"))
+        .args(["run", "--source"])
+        .arg(&live)
+        .arg("--out")
+        .arg(&out)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("dualgeo run");
+    let deadline = Instant::now() + Duration::from_secs(60);
+    while !ports.telemetry_bound() {
+        assert!(
+            Instant::now() < deadline,
+            "the telemetry sockets were never bound"
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    let sender = LiveSender::start(&recorded, ports);
+    std::thread::sleep(Duration::from_secs(11));
+    let sent: u64 = sender.stop().iter().sum();
+    std::thread::sleep(Duration::from_millis(500));
+    // SAFETY: signalling our own child.
+    unsafe { libc::kill(run.id() as libc::pid_t, libc::SIGINT) };
+    let o = run.wait_with_output().expect("dualgeo run output");
+    let log = format!(
+        "{}\n{}",
+        String::from_utf8_lossy(&o.stdout),
+        String::from_utf8_lossy(&o.stderr)
+    );
+    assert!(o.status.success(), "{log}");
+
+    let c = json(&out.join("counters.json"));
+    let n = |k: &str| c[format!("acquisition.source.{k}")].as_u64().unwrap_or(0);
+    eprintln!("sent {sent}; acquisition's counters: {c}");
+    // ~11 s, two UAVs, three message types at 50 Hz.
+    assert!(sent > 2 * 3 * 400, "only {sent} messages sent");
+    assert_eq!(
+        n("telemetry_messages"),
+        sent,
+        "every message sent was received\n{log}"
+    );
+    let frames = n("video_frames");
+    assert!(frames > 2 * 250, "{frames} frames decoded\n{c}");
+    // A frame before the first gimbal message has no camera pose; after it, all do.
+    assert!(
+        n("no_pose_gimbal") * 20 < frames,
+        "{} of {frames} frames without the gimbal's attitude\n{c}",
+        n("no_pose_gimbal")
+    );
+    let report = json(&out.join("report.json"));
+    let estimates = report["estimates_out"].as_u64().unwrap();
+    assert!(estimates > 40, "only {estimates} estimates\n{log}");
+}
