@@ -11,7 +11,9 @@
 //!   itself sees, with `classes` car, bus, truck; `yolo any` counts a box of any class.
 //! - `motion`: the motion detector (`[detection] kind = "motion"`, defaults) on every
 //!   frame, without the geolocation filter's gate: `motion (centre)` acquires the mover
-//!   nearest the image centre, `motion (designated)` the one nearest `acquire_px` set to
+//!   nearest the image centre, `motion (colour)` the one nearest it of the vehicle's
+//!   paint (`acquire_bgr` set to the preset's colour: the operator names "the silver
+//!   car"), `motion (designated)` the one nearest `acquire_px` set to
 //!   the target's pixel in the first frame (what an operator's click on the target
 //!   gives; the detector reads nothing else of the truth). It looks from frame
 //!   `2 × short_gap_frames` on (it needs that many frames behind it): its rows count
@@ -186,6 +188,7 @@ fn main() -> Result<()> {
         }
         if runs("motion") {
             t.centre.row("motion (centre)", preset);
+            t.colour_named.row("motion (colour)", preset);
             t.designated.row("motion (designated)", preset);
         }
     }
@@ -203,6 +206,7 @@ struct Tallies {
     yolo: Tally,
     any: Tally,
     centre: Tally,
+    colour_named: Tally,
     designated: Tally,
 }
 
@@ -234,9 +238,18 @@ fn fly(
 ) -> Result<()> {
     let runs = |d: &str| args.detectors.iter().any(|x| x == d);
     let (w, h) = (config.camera.width as i32, config.camera.height as i32);
+    let paint = config
+        .vehicle
+        .colour_bgr
+        .unwrap_or(acquisition::sim::render::VEHICLE_TOP_BGR)
+        .map(f64::from);
     let mut sim = Simulator::new(config)?;
     let mut colour = TrackedDetector::new(ColourBlobConfig::default())?;
     let mut motion = MotionDetector::new(motion_config)?;
+    let mut named = MotionDetector::new(MotionConfig {
+        acquire_bgr: Some(paint),
+        ..motion_config
+    })?;
     let mut designated = MotionDetector::new(motion_config)?;
     // The motion detector looks from the frame 2 × short_gap_frames on; its rows count
     // from there.
@@ -269,6 +282,11 @@ fn fly(
                 let found = motion.detect(camera, frame, None)?;
                 if k >= warm_up {
                     t.centre.see(truth, found, args.hit_px, ms(start));
+                }
+                let start = Instant::now();
+                let found = named.detect(camera, frame, None)?;
+                if k >= warm_up {
+                    t.colour_named.see(truth, found, args.hit_px, ms(start));
                 }
                 // The operator's click when the detector first looks.
                 if k == warm_up {

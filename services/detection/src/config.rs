@@ -143,6 +143,10 @@ mod tests {
                 "threshold",
             ),
             ("[detection.motion]\nradius = 3\n", "radius"),
+            (
+                "[detection.motion]\nacquire_bgr = [300.0, 0.0, 0.0]\n",
+                "acquire_bgr",
+            ),
             ("[detection]\nhue = 3\n", "hue"),
             (
                 "[detection]\nkind = \"yolo\"\n[detection.yolo]\nmodel = \"m\"\nconfidence = 0.3\n",

@@ -13,7 +13,7 @@
 //!    track (its last position carried by the ground's motion plus its own motion);
 //!    with neither, the mover nearest `acquire_px` (the operator's designation in the
 //!    first frames, per camera) or, without one, nearest the image centre starts a
-//!    track. Several vehicles move in a street: the centre is right for a camera that
+//!    track, of the colour `acquire_bgr` when the operator names one. Several vehicles move in a street: the centre is right for a camera that
 //!    points at the target (a tracking gimbal); two nadir UAVs flying either side of
 //!    it see it off-centre, beside any car that follows it, so designate it there;
 //! 4. its outline and top come from the difference with the frame `long_gap_frames`
@@ -66,9 +66,14 @@ pub struct MotionConfig {
     /// camera (left, right), full-resolution pixels: the operator's designation. The
     /// mover nearest it within `acquire_radius_px` starts the track. None: the mover
     /// nearest the image centre, at any distance. It serves once; a track dropped later
-    /// is acquired again nearest the centre (or [`MotionDetector::designate`]).
+    /// is looked for where it was (or at [`MotionDetector::designate`]'s pixel).
     pub acquire_px: Option<[[f64; 2]; 2]>,
     pub acquire_radius_px: f64,
+    /// The target's colour (BGR, 0–255) as the operator names it ("the silver car"):
+    /// a track starts only on a mover whose mean colour is within 2 ×
+    /// `colour_tolerance` of it in every channel (a mover's mean mixes its roof with
+    /// its darker sides). None: any colour.
+    pub acquire_bgr: Option<[f64; 3]>,
     /// A mover is the track's only if its mean colour is within this of the track's
     /// in every channel (a white car beside a silver one is not it).
     pub colour_tolerance: f64,
@@ -87,6 +92,7 @@ impl Default for MotionConfig {
             coast_frames: 15,
             acquire_px: None,
             acquire_radius_px: 60.0,
+            acquire_bgr: None,
             colour_tolerance: 25.0,
         }
     }
@@ -119,6 +125,12 @@ impl MotionConfig {
             .is_some_and(|a| a.iter().flatten().any(|v| !v.is_finite()))
         {
             return Err("acquire_px must be finite".into());
+        }
+        if self
+            .acquire_bgr
+            .is_some_and(|c| c.iter().any(|v| !(0.0..=255.0).contains(v)))
+        {
+            return Err("acquire_bgr must be three values in 0..=255".into());
         }
         Ok(())
     }
@@ -395,9 +407,16 @@ impl MotionDetector {
                     .copied()
             }
             (None, None) => {
+                let named = |m: &Mover| {
+                    c.acquire_bgr.is_none_or(|bgr| {
+                        (0..3).all(|i| (bgr[i] - m.bgr[i]).abs() <= 2.0 * c.colour_tolerance)
+                    })
+                };
                 let m = match cam.designated {
-                    Some(at) => nearest(at, &|m| distance(m, at) <= c.acquire_radius_px),
-                    None => nearest(centre, &|_| true),
+                    Some(at) => {
+                        nearest(at, &|m| named(m) && distance(m, at) <= c.acquire_radius_px)
+                    }
+                    None => nearest(centre, &named),
                 };
                 if m.is_some() {
                     self.counts.acquired += 1;
@@ -472,5 +491,85 @@ impl MotionDetector {
     /// The counts since the last call, and starts again from zero.
     pub fn take_counts(&mut self) -> MotionCounts {
         std::mem::take(&mut self.counts)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Frame `k` of a 640 × 480 synthetic flight: a blurred random texture moving
+    /// 2 px a frame to the right (the ground), a red box and a white box driving over
+    /// it 4 px a frame faster, the white one nearer the image centre.
+    fn frame(k: i32) -> cv::Mat {
+        let mut rng = 7u64;
+        let mut img = cv::Mat::new_rows_cols_with_default(480, 640, cv::CV_8UC3, 0.into()).unwrap();
+        for y in 0..480 {
+            for x in 0..640 {
+                rng = rng
+                    .wrapping_mul(6364136223846793005)
+                    .wrapping_add(1442695040888963407);
+                let v = 60 + (rng >> 58) as u8 * 2;
+                *img.at_2d_mut::<cv::Vec3b>(y, x).unwrap() = cv::Vec3b::from([v, v, v]);
+            }
+        }
+        let mut blurred = cv::Mat::default();
+        opencv::imgproc::gaussian_blur_def(&img, &mut blurred, cv::Size::new(5, 5), 1.2).unwrap();
+        let m = cv::Mat::from_slice_2d(&[[1.0f64, 0.0, 2.0 * k as f64], [0.0, 1.0, 0.0]]).unwrap();
+        let mut out = cv::Mat::default();
+        opencv::imgproc::warp_affine(
+            &blurred,
+            &mut out,
+            &m,
+            blurred.size().unwrap(),
+            opencv::imgproc::INTER_LINEAR,
+            cv::BORDER_REFLECT,
+            cv::Scalar::default(),
+        )
+        .unwrap();
+        for (y, bgr) in [(150, [36.0, 28.0, 214.0]), (250, [230.0, 230.0, 230.0])] {
+            opencv::imgproc::rectangle(
+                &mut out,
+                cv::Rect::new(100 + 6 * k, y, 24, 10),
+                cv::Scalar::new(bgr[0], bgr[1], bgr[2], 0.0),
+                -1,
+                opencv::imgproc::LINE_8,
+                0,
+            )
+            .unwrap();
+        }
+        out
+    }
+
+    /// The detections of frames 21..30 (the detector first looks at frame 21).
+    fn follow(config: MotionConfig) -> Vec<[f64; 2]> {
+        let mut d = MotionDetector::new(config).unwrap();
+        (0..30)
+            .filter_map(|k| d.detect(0, &frame(k), None).unwrap().map(|f| f.centre))
+            .collect()
+    }
+
+    #[test]
+    fn a_track_starts_on_the_named_colour_else_nearest_the_centre() {
+        // The boxes' centres are at y 154.5 (red) and 254.5 (white); the image
+        // centre's y is 239.5.
+        let by_centre = follow(MotionConfig::default());
+        assert!(!by_centre.is_empty());
+        assert!(
+            by_centre.iter().all(|c| (c[1] - 254.5).abs() < 2.0),
+            "{by_centre:?}"
+        );
+        let red = follow(MotionConfig {
+            acquire_bgr: Some([36.0, 28.0, 214.0]),
+            ..MotionConfig::default()
+        });
+        assert!(!red.is_empty());
+        assert!(red.iter().all(|c| (c[1] - 154.5).abs() < 2.0), "{red:?}");
+        // Each detection is the box's whole outline: x = 100 + 6k + 11.5 at frame k.
+        let last = red[red.len() - 1];
+        assert!(
+            (last[0] - (100.0 + 6.0 * 29.0 + 11.5)).abs() < 1.0,
+            "{last:?}"
+        );
     }
 }
