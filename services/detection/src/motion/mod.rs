@@ -13,7 +13,8 @@
 //!    track (its last position carried by the ground's motion plus its own motion);
 //!    with neither, the mover nearest `acquire_px` (the operator's designation in the
 //!    first frames, per camera) or, without one, nearest the image centre starts a
-//!    track, of the colour `acquire_bgr` when the operator names one. Several vehicles move in a street: the centre is right for a camera that
+//!    track, of the colour `acquire_bgr` when the operator names one ([`track`]).
+//!    Several vehicles move in a street: the centre is right for a camera that
 //!    points at the target (a tracking gimbal); two nadir UAVs flying either side of
 //!    it see it off-centre, beside any car that follows it, so designate it there;
 //! 4. its outline and top come from the difference with the frame `long_gap_frames`
@@ -24,8 +25,12 @@
 //! frames its search radius doubles, and after four times that it is dropped and the
 //! next mover is acquired as at the start.
 
+mod config;
 pub mod ground_motion;
 pub mod movers;
+mod track;
+
+pub use config::MotionConfig;
 
 use crate::prediction_gate::Gate;
 use crate::{DetectError, Detection};
@@ -34,107 +39,7 @@ use movers::{Differencer, Mover};
 use nalgebra::{Matrix3, Vector3};
 use opencv::core as cv;
 use opencv::prelude::*;
-use serde::{Deserialize, Serialize};
-
-/// `[detection.motion]`.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields, default)]
-pub struct MotionConfig {
-    /// The frame is scaled down by this factor for the ground's motion and the movers
-    /// (the outline is found at full resolution).
-    pub scale: u32,
-    /// The double difference's gap, frames (0.33 s at 30 FPS: a car at 6 m/s moves
-    /// 2 m).
-    pub short_gap_frames: u32,
-    /// The outline's gap, frames (1 s at 30 FPS: the car has left its old place).
-    pub long_gap_frames: u32,
-    /// A pixel has changed when one colour channel lies this far outside the old
-    /// frame's 3 × 3 range.
-    pub threshold: f64,
-    /// Blobs thinner than this (full-resolution pixels) are not movers (a building's
-    /// parallax leaves thin strips).
-    pub min_side_px: u32,
-    /// Smallest mover, full-resolution pixels.
-    pub min_area_px: u32,
-    /// How far from the track's prediction the target may be, pixels.
-    pub track_radius_px: f64,
-    /// Frames the track coasts without the target before its radius doubles (and
-    /// four times that before it is dropped).
-    pub coast_frames: u32,
-    /// Where the target is when the detector first looks (frame `2 ×
-    /// short_gap_frames` of each camera: it needs that many frames behind it), per
-    /// camera (left, right), full-resolution pixels: the operator's designation. The
-    /// mover nearest it within `acquire_radius_px` starts the track. None: the mover
-    /// nearest the image centre, at any distance. It serves once; a track dropped later
-    /// is looked for where it was (or at [`MotionDetector::designate`]'s pixel).
-    pub acquire_px: Option<[[f64; 2]; 2]>,
-    pub acquire_radius_px: f64,
-    /// The target's colour (BGR, 0–255) as the operator names it ("the silver car"):
-    /// a track starts only on a mover whose mean colour is within 2 ×
-    /// `colour_tolerance` of it in every channel (a mover's mean mixes its roof with
-    /// its darker sides). None: any colour.
-    pub acquire_bgr: Option<[f64; 3]>,
-    /// A mover is the track's only if its mean colour is within this of the track's
-    /// in every channel (a white car beside a silver one is not it).
-    pub colour_tolerance: f64,
-}
-
-impl Default for MotionConfig {
-    fn default() -> Self {
-        Self {
-            scale: 2,
-            short_gap_frames: 10,
-            long_gap_frames: 30,
-            threshold: 30.0,
-            min_side_px: 4,
-            min_area_px: 32,
-            track_radius_px: 30.0,
-            coast_frames: 15,
-            acquire_px: None,
-            acquire_radius_px: 60.0,
-            acquire_bgr: None,
-            colour_tolerance: 25.0,
-        }
-    }
-}
-
-impl MotionConfig {
-    pub fn validate(&self) -> Result<(), String> {
-        if !(1..=8).contains(&self.scale) {
-            return Err(format!("scale {} outside 1..=8", self.scale));
-        }
-        if self.short_gap_frames == 0 || self.long_gap_frames < self.short_gap_frames {
-            return Err("short_gap_frames must be ≥ 1 and long_gap_frames ≥ it".into());
-        }
-        if 2 * self.short_gap_frames.max(self.long_gap_frames) > 240 {
-            return Err("the gaps keep more than 240 frames".into());
-        }
-        let positive = |v: f64| v.is_finite() && v > 0.0;
-        if !positive(self.threshold)
-            || self.threshold > 255.0
-            || !positive(self.track_radius_px)
-            || !positive(self.acquire_radius_px)
-            || !positive(self.colour_tolerance)
-        {
-            return Err(
-                "threshold must be in (0, 255]; track_radius_px, acquire_radius_px and colour_tolerance > 0".into(),
-            );
-        }
-        if self
-            .acquire_px
-            .is_some_and(|a| a.iter().flatten().any(|v| !v.is_finite()))
-        {
-            return Err("acquire_px must be finite".into());
-        }
-        if self
-            .acquire_bgr
-            .is_some_and(|c| c.iter().any(|v| !(0.0..=255.0).contains(v)))
-        {
-            return Err("acquire_bgr must be three values in 0..=255".into());
-        }
-        Ok(())
-    }
-}
+use track::{Pick, Track};
 
 /// What the motion detector did since the last [`MotionDetector::take_counts`].
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
@@ -149,99 +54,6 @@ pub struct MotionCounts {
     pub track_lost: u64,
 }
 
-/// One camera's track: where the target was last found, that place carried since by
-/// the ground's motion, and how it moves per frame in the image and against the ground.
-/// Two predictions, because either model can fail: a ground homography fitted to roofs
-/// carries a point wrongly, and a camera that slews moves everything in the image.
-#[derive(Debug, Clone, Copy)]
-struct Track {
-    centre: [f64; 2],
-    carried: [f64; 2],
-    image_velocity: [f64; 2],
-    ground_velocity: [f64; 2],
-    missed: u32,
-    /// Its mean colour, smoothed, and when the track started: a mover matches when
-    /// it is near either (wrong picks cannot drag the colour away from the target's).
-    bgr: [f64; 3],
-    first_bgr: [f64; 3],
-    /// The camera's ground was lost since it was last found (the camera jumped): the
-    /// predictions no longer hold, so it is looked for as at an acquisition.
-    blind: bool,
-}
-
-impl Track {
-    fn new(m: &Mover) -> Self {
-        Self {
-            centre: m.centre,
-            carried: m.centre,
-            image_velocity: [0.0; 2],
-            ground_velocity: [0.0; 2],
-            missed: 0,
-            bgr: m.bgr,
-            first_bgr: m.bgr,
-            blind: false,
-        }
-    }
-
-    /// How far `m`'s colour is from the track's (now or at its start, the nearer): the
-    /// largest channel difference.
-    fn colour_distance(&self, m: &Mover) -> f64 {
-        let far = |bgr: &[f64; 3]| {
-            (0..3)
-                .map(|i| (bgr[i] - m.bgr[i]).abs())
-                .fold(0.0, f64::max)
-        };
-        far(&self.bgr).min(far(&self.first_bgr))
-    }
-
-    /// Where it should be in this frame: in the image, and against the ground. Over a
-    /// gap the velocities carry it at most [`EXTRAPOLATE_FRAMES`] frames: a velocity is
-    /// a guess, and a long extrapolation of a wrong one runs away.
-    fn predictions(&self) -> [[f64; 2]; 2] {
-        let n = (self.missed + 1).min(EXTRAPOLATE_FRAMES) as f64;
-        [
-            [
-                self.centre[0] + n * self.image_velocity[0],
-                self.centre[1] + n * self.image_velocity[1],
-            ],
-            [
-                self.carried[0] + n * self.ground_velocity[0],
-                self.carried[1] + n * self.ground_velocity[1],
-            ],
-        ]
-    }
-
-    /// Found again as `m`. An α–β filter: each velocity moves by [`VELOCITY_GAIN`] of
-    /// the prediction's miss, clamped to [`MAX_VELOCITY_STEP_PX`], and only when the
-    /// previous frame found it too (a pick after a gap may be wrong, and would teach a
-    /// wrong velocity that the next gap extrapolates).
-    fn found(&mut self, m: &Mover) {
-        let at = m.centre;
-        if self.missed == 0 {
-            let [image, ground] = self.predictions();
-            let step =
-                |miss: f64| VELOCITY_GAIN * miss.clamp(-MAX_VELOCITY_STEP_PX, MAX_VELOCITY_STEP_PX);
-            for i in 0..2 {
-                self.image_velocity[i] += step(at[i] - image[i]);
-                self.ground_velocity[i] += step(at[i] - ground[i]);
-            }
-        }
-        for i in 0..3 {
-            self.bgr[i] = 0.8 * self.bgr[i] + 0.2 * m.bgr[i];
-        }
-        self.centre = at;
-        self.carried = at;
-        self.missed = 0;
-        self.blind = false;
-    }
-}
-
-/// A coasting track's velocities carry it at most this many frames.
-const EXTRAPOLATE_FRAMES: u32 = 8;
-/// The α–β filter's velocity gain, and the largest miss it learns from, pixels.
-const VELOCITY_GAIN: f64 = 0.3;
-const MAX_VELOCITY_STEP_PX: f64 = 4.0;
-
 #[derive(Default)]
 struct Camera {
     ground: GroundMotion,
@@ -253,6 +65,98 @@ struct Camera {
     /// Where to acquire when there is no track (the designation), once.
     designated: Option<[f64; 2]>,
     frames: u64,
+}
+
+impl Camera {
+    /// Takes in the newest `frame`: its small and grey images, the ground's motion
+    /// since the previous frame, the history registered onto it, and the track's
+    /// last place carried by that motion. True when the ground's motion could not be
+    /// measured (the history starts again and the track goes blind).
+    fn register(
+        &mut self,
+        frame: &cv::Mat,
+        c: &MotionConfig,
+        camera: usize,
+    ) -> opencv::Result<bool> {
+        let small_size = cv::Size::new(
+            (frame.cols() / c.scale as i32).max(1),
+            (frame.rows() / c.scale as i32).max(1),
+        );
+        if c.scale == 1 {
+            frame.copy_to(&mut self.small)?;
+        } else {
+            opencv::imgproc::resize(
+                frame,
+                &mut self.small,
+                small_size,
+                0.0,
+                0.0,
+                opencv::imgproc::INTER_AREA,
+            )?;
+        }
+        opencv::imgproc::cvt_color_def(
+            &self.small,
+            &mut self.grey,
+            opencv::imgproc::COLOR_BGR2GRAY,
+        )?;
+        let to_full = scale_matrix(c.scale as f64);
+        let to_small = to_full.try_inverse().unwrap_or_else(Matrix3::identity);
+        self.frames += 1;
+        let seed = (camera as u64) << 40 | self.frames;
+        let history = self.history.get_or_insert_with(|| {
+            History::new(2 * c.short_gap_frames.max(c.long_gap_frames) as usize)
+        });
+        let step = self.ground.step(&self.grey, seed)?;
+        // The ground's motion since the previous frame, full-resolution pixels.
+        let (moved, lost) = match (step, &self.previous) {
+            (Some(h_small), Some((small, full))) => {
+                let h = to_full * h_small * to_small;
+                history.push(small, full, h)?;
+                (Some(h), false)
+            }
+            _ => {
+                history.clear();
+                if let Some(t) = &mut self.track {
+                    t.blind = true;
+                }
+                (None, self.previous.is_some())
+            }
+        };
+        match &mut self.previous {
+            Some((small, full)) => {
+                self.small.copy_to(small)?;
+                frame.copy_to(full)?;
+            }
+            None => self.previous = Some((self.small.try_clone()?, frame.try_clone()?)),
+        }
+        // The track's last place, carried by the ground's motion (kept when the ground
+        // was not measured this frame).
+        if let (Some(t), Some(h)) = (&mut self.track, moved) {
+            let p = h * Vector3::new(t.carried[0], t.carried[1], 1.0);
+            if p.z.abs() > 1e-9 {
+                t.carried = [p.x / p.z, p.y / p.z];
+            }
+        }
+        Ok(lost)
+    }
+
+    /// The track after this frame: found again, started, or one more frame missed; a
+    /// track missed for 4 × `coast_frames` is dropped (true), and the next mover near
+    /// where it should be is taken for it.
+    fn update_track(&mut self, outlined: Option<&Mover>, c: &MotionConfig) -> bool {
+        match (outlined, &mut self.track) {
+            (Some(m), Some(t)) => t.found(m),
+            (Some(m), None) => self.track = Some(Track::new(m)),
+            (None, Some(t)) if t.missed < 4 * c.coast_frames => t.missed += 1,
+            (None, Some(t)) => {
+                self.designated = Some(t.predictions()[0]);
+                self.track = None;
+                return true;
+            }
+            (None, None) => {}
+        }
+        false
+    }
 }
 
 pub struct MotionDetector {
@@ -295,65 +199,15 @@ impl MotionDetector {
             .cameras
             .get_mut(camera)
             .ok_or_else(|| DetectError::Config(format!("camera {camera} is not 0 or 1")))?;
-        let s = c.scale as f64;
-        let small_size = cv::Size::new(
-            (frame.cols() / c.scale as i32).max(1),
-            (frame.rows() / c.scale as i32).max(1),
-        );
-        if c.scale == 1 {
-            frame.copy_to(&mut cam.small)?;
-        } else {
-            opencv::imgproc::resize(
-                frame,
-                &mut cam.small,
-                small_size,
-                0.0,
-                0.0,
-                opencv::imgproc::INTER_AREA,
-            )?;
+        if cam.register(frame, &c, camera)? {
+            self.counts.no_ground += 1;
         }
-        opencv::imgproc::cvt_color_def(&cam.small, &mut cam.grey, opencv::imgproc::COLOR_BGR2GRAY)?;
+        let s = c.scale as f64;
         let to_full = scale_matrix(s);
         let to_small = to_full.try_inverse().unwrap_or_else(Matrix3::identity);
-        cam.frames += 1;
-        let seed = (camera as u64) << 40 | cam.frames;
-        let history = cam.history.get_or_insert_with(|| {
-            History::new(2 * c.short_gap_frames.max(c.long_gap_frames) as usize)
-        });
-        let step = cam.ground.step(&cam.grey, seed)?;
-        // The ground's motion since the previous frame, full-resolution pixels.
-        let moved = match (step, &cam.previous) {
-            (Some(h_small), Some((small, full))) => {
-                let h = to_full * h_small * to_small;
-                history.push(small, full, h)?;
-                Some(h)
-            }
-            _ => {
-                if cam.previous.is_some() {
-                    self.counts.no_ground += 1;
-                }
-                history.clear();
-                if let Some(t) = &mut cam.track {
-                    t.blind = true;
-                }
-                None
-            }
+        let Some(history) = &cam.history else {
+            return Ok(None);
         };
-        match &mut cam.previous {
-            Some((small, full)) => {
-                cam.small.copy_to(small)?;
-                frame.copy_to(full)?;
-            }
-            None => cam.previous = Some((cam.small.try_clone()?, frame.try_clone()?)),
-        }
-        // The track's last place, carried by the ground's motion (kept when the ground
-        // was not measured this frame).
-        if let (Some(t), Some(h)) = (&mut cam.track, moved) {
-            let p = h * Vector3::new(t.carried[0], t.carried[1], 1.0);
-            if p.z.abs() > 1e-9 {
-                t.carried = [p.x / p.z, p.y / p.z];
-            }
-        }
         let k = c.short_gap_frames as usize;
         let (Some(near), Some(far)) = (history.back(k), history.back(2 * k)) else {
             // Not enough frames behind (the start, or the ground was lost): the track
@@ -378,51 +232,20 @@ impl MotionDetector {
             (frame.cols() as f64 - 1.0) / 2.0,
             (frame.rows() as f64 - 1.0) / 2.0,
         ];
-        let distance = |m: &Mover, p: [f64; 2]| (m.centre[0] - p[0]).hypot(m.centre[1] - p[1]);
-        let nearest = |p: [f64; 2], keep: &dyn Fn(&Mover) -> bool| {
-            self.movers
-                .iter()
-                .filter(|m| keep(m))
-                .min_by(|a, b| distance(a, p).total_cmp(&distance(b, p)))
-                .copied()
-        };
-        let picked = match (gate, cam.track) {
-            (Some(g), _) => nearest(g.centre, &|m| g.contains(m.centre)),
-            (None, Some(t)) => {
-                // The radius holds for `coast_frames`, then grows to 3× (a car beside
-                // the target must not take over after a few frames' gap).
-                let coast = c.coast_frames.max(1);
-                let radius = if t.blind {
-                    c.acquire_radius_px
-                } else {
-                    c.track_radius_px
-                        * (1.0 + t.missed.saturating_sub(coast) as f64 / coast as f64).min(3.0)
-                };
-                let [a, b] = t.predictions();
-                let to_track = |m: &Mover| distance(m, a).min(distance(m, b));
-                self.movers
-                    .iter()
-                    .filter(|m| to_track(m) <= radius && t.colour_distance(m) <= c.colour_tolerance)
-                    .min_by(|x, y| to_track(x).total_cmp(&to_track(y)))
-                    .copied()
-            }
-            (None, None) => {
-                let named = |m: &Mover| {
-                    c.acquire_bgr.is_none_or(|bgr| {
-                        (0..3).all(|i| (bgr[i] - m.bgr[i]).abs() <= 2.0 * c.colour_tolerance)
-                    })
-                };
-                let m = match cam.designated {
-                    Some(at) => {
-                        nearest(at, &|m| named(m) && distance(m, at) <= c.acquire_radius_px)
-                    }
-                    None => nearest(centre, &named),
-                };
-                if m.is_some() {
-                    self.counts.acquired += 1;
-                    cam.designated = None;
-                }
-                m
+        let picked = match track::pick(
+            &c,
+            &self.movers,
+            gate,
+            cam.track.as_ref(),
+            cam.designated,
+            centre,
+        ) {
+            Pick::None => None,
+            Pick::Followed(m) => Some(m),
+            Pick::Acquired(m) => {
+                self.counts.acquired += 1;
+                cam.designated = None;
+                Some(m)
             }
         };
         // The outline from `long_gap_frames` back, or where that frame did not see the
@@ -447,17 +270,8 @@ impl MotionDetector {
                 }
             }
         }
-        match (outlined, &mut cam.track) {
-            (Some(m), Some(t)) => t.found(&m),
-            (Some(m), None) => cam.track = Some(Track::new(&m)),
-            (None, Some(t)) if t.missed < 4 * c.coast_frames => t.missed += 1,
-            (None, Some(t)) => {
-                // Dropped: the next mover near where it should be is taken for it.
-                self.counts.track_lost += 1;
-                cam.designated = Some(t.predictions()[0]);
-                cam.track = None;
-            }
-            (None, None) => {}
+        if cam.update_track(outlined.as_ref(), &c) {
+            self.counts.track_lost += 1;
         }
         Ok(outlined.map(|m| Detection {
             bbox: m.bbox,
