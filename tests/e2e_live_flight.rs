@@ -11,11 +11,12 @@ mod live_sender;
 #[path = "support/scratch.rs"]
 mod scratch;
 
-use live_sender::{have_ffmpeg, write_live_toml, LivePorts, LiveSender};
+use live_sender::{
+    have_ffmpeg, record_flight, start_run, stop_run, write_live_toml, LivePorts, LiveSender,
+};
 use scratch::Scratch;
 use serde_json::Value;
-use std::process::{Command, Stdio};
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 fn json(path: &std::path::Path) -> Value {
     serde_json::from_str(&std::fs::read_to_string(path).expect("read json")).expect("json")
@@ -29,41 +30,14 @@ fn a_live_flight_over_udp_loses_no_telemetry_and_survives_stalls() {
     }
     let dir = Scratch::new("live-flight");
     let recorded = dir.join("recorded");
-    let o = Command::new(env!("CARGO_BIN_EXE_dualgeo"))
-        .args([
-            "simulate",
-            "--preset",
-            "default",
-            "--duration-s",
-            "16",
-            "--flight-out",
-        ])
-        .arg(&recorded)
-        .output()
-        .expect("simulate");
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let dualgeo = std::path::Path::new(env!("CARGO_BIN_EXE_dualgeo"));
+    record_flight(dualgeo, "default", 16, &recorded);
     let ports = LivePorts::pick();
     let live = dir.join("live.toml");
     write_live_toml(&recorded, &live, ports);
 
     let out = dir.join("out");
-    let run = Command::new(env!("CARGO_BIN_EXE_dualgeo"))
-        .args(["run", "--source"])
-        .arg(&live)
-        .arg("--out")
-        .arg(&out)
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .expect("dualgeo run");
-    let deadline = Instant::now() + Duration::from_secs(60);
-    while !ports.telemetry_bound() {
-        assert!(
-            Instant::now() < deadline,
-            "the telemetry sockets were never bound"
-        );
-        std::thread::sleep(Duration::from_millis(50));
-    }
+    let run = start_run(dualgeo, &live, &out, ports);
     let sender = LiveSender::start(&recorded, ports);
     std::thread::sleep(Duration::from_secs(5));
     sender.stall_video(0, Duration::from_millis(1200));
@@ -72,16 +46,8 @@ fn a_live_flight_over_udp_loses_no_telemetry_and_survives_stalls() {
     std::thread::sleep(Duration::from_secs(5));
     let sent: u64 = sender.stop().iter().sum();
     // The last datagrams land; then the operator stops the run.
-    std::thread::sleep(Duration::from_millis(500));
-    // SAFETY: signalling our own child.
-    unsafe { libc::kill(run.id() as libc::pid_t, libc::SIGINT) };
-    let o = run.wait_with_output().expect("dualgeo run output");
-    let log = format!(
-        "{}\n{}",
-        String::from_utf8_lossy(&o.stdout),
-        String::from_utf8_lossy(&o.stderr)
-    );
-    assert!(o.status.success(), "{log}");
+    let (clean, log) = stop_run(run);
+    assert!(clean, "{log}");
 
     let c = json(&out.join("counters.json"));
     let n = |k: &str| c[format!("acquisition.source.{k}")].as_u64().unwrap_or(0);

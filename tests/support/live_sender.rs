@@ -79,6 +79,57 @@ pub fn write_live_toml(recorded: &Path, out: &Path, ports: LivePorts) {
     std::fs::write(out, toml::to_string(&meta).expect("TOML")).expect("write live flight.toml");
 }
 
+/// Records `seconds` of `preset` as a flight (`dualgeo simulate --flight-out OUT`).
+pub fn record_flight(dualgeo: &Path, preset: &str, seconds: u32, out: &Path) {
+    let o = Command::new(dualgeo)
+        .args(["simulate", "--preset", preset, "--duration-s"])
+        .arg(seconds.to_string())
+        .arg("--flight-out")
+        .arg(out)
+        .output()
+        .expect("simulate");
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+}
+
+/// Starts `dualgeo run --source LIVE --out OUT` (the `dualgeo` binary) and waits,
+/// at most 60 s, until it has bound every telemetry port, so that nothing sent is lost
+/// before it listens.
+pub fn start_run(dualgeo: &Path, live: &Path, out: &Path, ports: LivePorts) -> Child {
+    let run = Command::new(dualgeo)
+        .args(["run", "--source"])
+        .arg(live)
+        .arg("--out")
+        .arg(out)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("dualgeo run");
+    let deadline = Instant::now() + Duration::from_secs(60);
+    while !ports.telemetry_bound() {
+        assert!(
+            Instant::now() < deadline,
+            "the telemetry sockets were never bound"
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    run
+}
+
+/// Stops a run as its operator does (SIGINT) once the last datagrams have landed;
+/// whether it exited cleanly, and its log (stdout and stderr).
+pub fn stop_run(run: Child) -> (bool, String) {
+    std::thread::sleep(Duration::from_millis(500));
+    // SAFETY: signalling our own child.
+    unsafe { libc::kill(run.id() as libc::pid_t, libc::SIGINT) };
+    let o = run.wait_with_output().expect("dualgeo run output");
+    let log = format!(
+        "{}\n{}",
+        String::from_utf8_lossy(&o.stdout),
+        String::from_utf8_lossy(&o.stderr)
+    );
+    (o.status.success(), log)
+}
+
 /// One UAV's telemetry as (autopilot time, value) series.
 struct Series {
     attitude: Vec<(f64, [f64; 3])>,

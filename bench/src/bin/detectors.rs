@@ -26,6 +26,7 @@
 //! Run: `cargo run --release -p dualgeo-bench --bin detectors [-- --seconds 10
 //! --presets default,silver_parked --detectors colour,motion]`
 
+use acquisition::sim::texture::hash;
 use acquisition::sim::{Presets, SimConfig, Simulator};
 use anyhow::{Context, Result};
 use clap::Parser;
@@ -214,18 +215,11 @@ struct Tallies {
 /// draws other navigation noise (as the Monte Carlo varies a scene).
 fn seeded(mut config: SimConfig, seed: u64) -> SimConfig {
     if seed > 0 {
-        let h = splitmix(config.seed ^ splitmix(seed));
+        let h = hash(config.seed ^ hash(seed));
         config.seed = h;
-        config.driving.start_m += 150.0 * ((splitmix(h ^ 1) >> 11) as f64 / (1u64 << 53) as f64);
+        config.driving.start_m += 150.0 * ((hash(h ^ 1) >> 11) as f64 / (1u64 << 53) as f64);
     }
     config
-}
-
-fn splitmix(mut x: u64) -> u64 {
-    x = x.wrapping_add(0x9e37_79b9_7f4a_7c15);
-    x = (x ^ (x >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-    x = (x ^ (x >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-    x ^ (x >> 31)
 }
 
 /// Flies one seed of a preset through the chosen detectors, into `t`.

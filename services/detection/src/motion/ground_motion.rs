@@ -269,30 +269,16 @@ mod tests {
     #[test]
     fn the_ground_motion_of_a_shifted_texture_is_the_shift() {
         // A random texture shifted by (3, −2) pixels.
-        let mut rng = 12345u64;
-        let mut img = cv::Mat::new_rows_cols_with_default(240, 320, cv::CV_8UC1, 0.into()).unwrap();
-        for y in 0..240 {
-            for x in 0..320 {
-                rng = rng
-                    .wrapping_mul(6364136223846793005)
-                    .wrapping_add(1442695040888963407);
-                *img.at_2d_mut::<u8>(y, x).unwrap() = (rng >> 56) as u8;
-            }
-        }
-        let mut blurred = cv::Mat::default();
-        opencv::imgproc::gaussian_blur_def(&img, &mut blurred, cv::Size::new(5, 5), 1.5).unwrap();
-        let shift = cv::Mat::from_slice_2d(&[[1.0f64, 0.0, 3.0], [0.0, 1.0, -2.0]]).unwrap();
-        let mut moved = cv::Mat::default();
-        opencv::imgproc::warp_affine(
-            &blurred,
-            &mut moved,
-            &shift,
-            blurred.size().unwrap(),
-            opencv::imgproc::INTER_LINEAR,
-            cv::BORDER_REFLECT,
-            cv::Scalar::default(),
-        )
-        .unwrap();
+        let grey = |m: &cv::Mat| {
+            let mut g = cv::Mat::default();
+            opencv::imgproc::cvt_color_def(m, &mut g, opencv::imgproc::COLOR_BGR2GRAY).unwrap();
+            g
+        };
+        let ground = super::super::test_scene::ground(320, 240, 12345);
+        let (blurred, moved) = (
+            grey(&ground),
+            grey(&super::super::test_scene::shifted(&ground, 3.0, -2.0)),
+        );
         let mut g = GroundMotion::default();
         assert!(g.step(&blurred, 1).unwrap().is_none());
         let h = g.step(&moved, 2).unwrap().expect("registered");

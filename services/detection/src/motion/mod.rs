@@ -28,6 +28,8 @@
 mod config;
 pub mod ground_motion;
 pub mod movers;
+#[cfg(test)]
+mod test_scene;
 mod track;
 
 pub use config::MotionConfig;
@@ -316,41 +318,9 @@ mod tests {
     /// 2 px a frame to the right (the ground), a red box and a white box driving over
     /// it 4 px a frame faster, the white one nearer the image centre.
     fn frame(k: i32) -> cv::Mat {
-        let mut rng = 7u64;
-        let mut img = cv::Mat::new_rows_cols_with_default(480, 640, cv::CV_8UC3, 0.into()).unwrap();
-        for y in 0..480 {
-            for x in 0..640 {
-                rng = rng
-                    .wrapping_mul(6364136223846793005)
-                    .wrapping_add(1442695040888963407);
-                let v = 60 + (rng >> 58) as u8 * 2;
-                *img.at_2d_mut::<cv::Vec3b>(y, x).unwrap() = cv::Vec3b::from([v, v, v]);
-            }
-        }
-        let mut blurred = cv::Mat::default();
-        opencv::imgproc::gaussian_blur_def(&img, &mut blurred, cv::Size::new(5, 5), 1.2).unwrap();
-        let m = cv::Mat::from_slice_2d(&[[1.0f64, 0.0, 2.0 * k as f64], [0.0, 1.0, 0.0]]).unwrap();
-        let mut out = cv::Mat::default();
-        opencv::imgproc::warp_affine(
-            &blurred,
-            &mut out,
-            &m,
-            blurred.size().unwrap(),
-            opencv::imgproc::INTER_LINEAR,
-            cv::BORDER_REFLECT,
-            cv::Scalar::default(),
-        )
-        .unwrap();
+        let mut out = test_scene::shifted(&test_scene::ground(640, 480, 7), 2.0 * k as f64, 0.0);
         for (y, bgr) in [(150, [36.0, 28.0, 214.0]), (250, [230.0, 230.0, 230.0])] {
-            opencv::imgproc::rectangle(
-                &mut out,
-                cv::Rect::new(100 + 6 * k, y, 24, 10),
-                cv::Scalar::new(bgr[0], bgr[1], bgr[2], 0.0),
-                -1,
-                opencv::imgproc::LINE_8,
-                0,
-            )
-            .unwrap();
+            test_scene::draw_box(&mut out, cv::Rect::new(100 + 6 * k, y, 24, 10), bgr);
         }
         out
     }

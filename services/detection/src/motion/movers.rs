@@ -387,47 +387,7 @@ pub fn otsu(values: impl Iterator<Item = u8>) -> Option<u8> {
 mod tests {
     use super::*;
 
-    /// A 320 × 240 random texture (blurred), shifted by `shift` pixels, with a grey
-    /// square at `square` (top-left) drawn over it.
-    fn scene(shift: f64, square: Option<(i32, i32)>) -> cv::Mat {
-        let mut rng = 99u64;
-        let mut img = cv::Mat::new_rows_cols_with_default(240, 320, cv::CV_8UC3, 0.into()).unwrap();
-        for y in 0..240 {
-            for x in 0..320 {
-                rng = rng
-                    .wrapping_mul(6364136223846793005)
-                    .wrapping_add(1442695040888963407);
-                let v = 60 + (rng >> 58) as u8 * 2;
-                *img.at_2d_mut::<cv::Vec3b>(y, x).unwrap() = cv::Vec3b::from([v, v, v]);
-            }
-        }
-        let mut blurred = cv::Mat::default();
-        opencv::imgproc::gaussian_blur_def(&img, &mut blurred, cv::Size::new(5, 5), 1.2).unwrap();
-        let m = cv::Mat::from_slice_2d(&[[1.0f64, 0.0, shift], [0.0, 1.0, 0.0]]).unwrap();
-        let mut out = cv::Mat::default();
-        opencv::imgproc::warp_affine(
-            &blurred,
-            &mut out,
-            &m,
-            blurred.size().unwrap(),
-            opencv::imgproc::INTER_LINEAR,
-            cv::BORDER_REFLECT,
-            cv::Scalar::default(),
-        )
-        .unwrap();
-        if let Some((x, y)) = square {
-            opencv::imgproc::rectangle(
-                &mut out,
-                cv::Rect::new(x, y, 12, 6),
-                cv::Scalar::new(200.0, 200.0, 205.0, 0.0),
-                -1,
-                opencv::imgproc::LINE_8,
-                0,
-            )
-            .unwrap();
-        }
-        out
-    }
+    use super::super::test_scene;
 
     fn shift(dx: f64) -> Matrix3<f64> {
         Matrix3::new(1.0, 0.0, dx, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0)
@@ -437,17 +397,12 @@ mod tests {
     fn a_box_moving_over_moving_ground_is_the_only_mover() {
         // The ground moves 2 px a frame; the box 4 px a frame on top of that; frames 0,
         // 10 and 20 (the newest). A second box is parked: it moves with the ground.
+        let ground = test_scene::ground(320, 240, 99);
         let frame = |k: i32| {
-            let mut f = scene(2.0 * k as f64, Some((100 + 6 * k, 120)));
-            opencv::imgproc::rectangle(
-                &mut f,
-                cv::Rect::new(40 + 2 * k, 60, 12, 6),
-                cv::Scalar::new(200.0, 200.0, 205.0, 0.0),
-                -1,
-                opencv::imgproc::LINE_8,
-                0,
-            )
-            .unwrap();
+            let mut f = test_scene::shifted(&ground, 2.0 * k as f64, 0.0);
+            let silver = [200.0, 200.0, 205.0];
+            test_scene::draw_box(&mut f, cv::Rect::new(100 + 6 * k, 120, 12, 6), silver);
+            test_scene::draw_box(&mut f, cv::Rect::new(40 + 2 * k, 60, 12, 6), silver);
             f
         };
         let (now, near, far) = (frame(20), frame(10), frame(0));

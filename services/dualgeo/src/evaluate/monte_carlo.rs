@@ -15,6 +15,7 @@ use super::mc_stats::{of_a_look_alike, summarise, EstimateRow, RunRecord, SceneS
 use super::noise::estimator_for;
 use super::stream::{Lane, SceneStream};
 use super::suite::with_protocol;
+use acquisition::sim::texture::hash;
 use acquisition::sim::{Presets, SimConfig};
 use anyhow::{Context, Result};
 use matching::MatchingConfig;
@@ -63,9 +64,9 @@ impl NavModel {
 /// A scene's preset under the Table 2 protocol, made into seed `seed`'s flight.
 pub fn seeded(mut config: SimConfig, seed: u64, nav: NavModel) -> SimConfig {
     config = with_protocol(config, 1);
-    let h = splitmix(config.seed ^ splitmix(seed));
+    let h = hash(config.seed ^ hash(seed));
     config.seed = h;
-    let unit = |k: u64| (splitmix(h ^ k) >> 11) as f64 / (1u64 << 53) as f64;
+    let unit = |k: u64| (hash(h ^ k) >> 11) as f64 / (1u64 << 53) as f64;
     config.driving.start_m += 150.0 * unit(1);
     if let BiasModel::Eq34 {
         delta0_deg,
@@ -83,13 +84,6 @@ pub fn seeded(mut config: SimConfig, seed: u64, nav: NavModel) -> SimConfig {
         NavModel::GaussMarkov => NavErrorModel::consumer_gps(),
     };
     config
-}
-
-fn splitmix(mut x: u64) -> u64 {
-    x = x.wrapping_add(0x9e37_79b9_7f4a_7c15);
-    x = (x ^ (x >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-    x = (x ^ (x >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-    x ^ (x >> 31)
 }
 
 /// What the Monte Carlo runs.
