@@ -21,9 +21,12 @@
 //!    back, in a window around it ([`movers::Differencer::outline`]).
 //!
 //! A vehicle that stops or hides disappears from the differences: the track then
-//! coasts (carried by the ground, at its own last velocity); after `coast_frames`
-//! frames its search radius doubles, and after four times that it is dropped and the
-//! next mover is acquired as at the start.
+//! coasts (in the image and carried by the ground, at its velocities for at most 8
+//! frames); after `coast_frames` frames its search radius grows, up to 3×, and after
+//! four times that it is dropped and the next mover near where it should be is taken
+//! for it. When the ground's motion is lost (the camera jumped beyond KLT and the
+//! phase correlation), the history starts again and the track is looked for within
+//! `acquire_radius_px`.
 
 mod config;
 pub mod ground_motion;
@@ -50,7 +53,8 @@ pub struct MotionCounts {
     pub movers: u64,
     /// Frames whose ground motion could not be measured (the history restarts).
     pub no_ground: u64,
-    /// Tracks started (no gate, no track: the mover nearest the centre).
+    /// Tracks started (no gate, no track: the mover nearest the designation or the
+    /// image centre).
     pub acquired: u64,
     /// Tracks dropped after 4 × `coast_frames` frames without the target.
     pub track_lost: u64,
