@@ -25,15 +25,15 @@ pub struct MotionConfig {
     pub min_area_px: u32,
     /// How far from the track's prediction the target may be, pixels.
     pub track_radius_px: f64,
-    /// Frames the track coasts without the target before its radius doubles (and
-    /// four times that before it is dropped).
+    /// Frames the track coasts without the target before its radius starts to grow
+    /// (to 3× over as many frames again; four times this before it is dropped).
     pub coast_frames: u32,
     /// Where the target is when the detector first looks (frame `2 ×
     /// short_gap_frames` of each camera: it needs that many frames behind it), per
     /// camera (left, right), full-resolution pixels: the operator's designation. The
     /// mover nearest it within `acquire_radius_px` starts the track. None: the mover
     /// nearest the image centre, at any distance. It serves once; a track dropped later
-    /// is looked for where it was (or at [`MotionDetector::designate`]'s pixel).
+    /// is looked for where it was (or at [`super::MotionDetector::designate`]'s pixel).
     pub acquire_px: Option<[[f64; 2]; 2]>,
     pub acquire_radius_px: f64,
     /// The target's colour (BGR, 0–255) as the operator names it ("the silver car"):
