@@ -205,30 +205,28 @@ impl History {
         }
     }
 
-    /// The newest frame has arrived: `previous` (small, full) is the frame before it and
-    /// `h` takes its full-resolution pixels to the newest's. Every older frame's map is
-    /// extended by `h`; the oldest beyond the capacity is dropped (its buffers reused).
-    pub fn push(&mut self, small: &cv::Mat, full: &cv::Mat, h: Matrix3<f64>) -> opencv::Result<()> {
+    /// The newest frame has arrived: `small` and `full` are the frame before it and `h`
+    /// takes its full-resolution pixels to the newest's. Every older frame's map is
+    /// extended by `h`. The images are swapped in, not copied: the caller gets back the
+    /// oldest entry's buffers beyond the capacity (or empty ones) to fill next.
+    pub fn push(&mut self, small: &mut cv::Mat, full: &mut cv::Mat, h: Matrix3<f64>) {
         for past in &mut self.frames {
             past.to_now = h * past.to_now;
         }
-        let mut entry = if self.frames.len() >= self.capacity {
-            match self.frames.pop_front() {
-                Some(p) => p,
-                None => return Ok(()),
-            }
+        let recycled = if self.frames.len() >= self.capacity {
+            self.frames.pop_front()
         } else {
-            Past {
-                small: cv::Mat::default(),
-                full: cv::Mat::default(),
-                to_now: Matrix3::identity(),
-            }
+            None
         };
-        small.copy_to(&mut entry.small)?;
-        full.copy_to(&mut entry.full)?;
+        let mut entry = recycled.unwrap_or_else(|| Past {
+            small: cv::Mat::default(),
+            full: cv::Mat::default(),
+            to_now: Matrix3::identity(),
+        });
+        std::mem::swap(small, &mut entry.small);
+        std::mem::swap(full, &mut entry.full);
         entry.to_now = h;
         self.frames.push_back(entry);
-        Ok(())
     }
 
     /// Forgets every frame (the ground was lost: the chain of homographies is broken).
@@ -291,11 +289,10 @@ mod tests {
 
     #[test]
     fn the_history_chains_every_frame_onto_the_newest() {
-        let m = cv::Mat::default();
         let mut h = History::new(3);
         let t = |dx: f64| Matrix3::new(1.0, 0.0, dx, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0);
         for dx in [1.0, 2.0, 4.0, 8.0] {
-            h.push(&m, &m, t(dx)).unwrap();
+            h.push(&mut cv::Mat::default(), &mut cv::Mat::default(), t(dx));
         }
         assert_eq!(h.len(), 3);
         assert_eq!(h.back(1).unwrap().to_now, t(8.0));

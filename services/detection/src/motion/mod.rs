@@ -114,10 +114,13 @@ impl Camera {
         });
         let step = self.ground.step(&self.grey, seed)?;
         // The ground's motion since the previous frame, full-resolution pixels.
-        let (moved, lost) = match (step, &self.previous) {
+        let had_previous = self.previous.is_some();
+        let (moved, lost) = match (step, &mut self.previous) {
+            // The previous frame's buffers go into the history; recycled ones come
+            // back, and the newest frame is copied into them below (one copy a frame).
             (Some(h_small), Some((small, full))) => {
                 let h = to_full * h_small * to_small;
-                history.push(small, full, h)?;
+                history.push(small, full, h);
                 (Some(h), false)
             }
             _ => {
@@ -125,7 +128,7 @@ impl Camera {
                 if let Some(t) = &mut self.track {
                     t.blind = true;
                 }
-                (None, self.previous.is_some())
+                (None, had_previous)
             }
         };
         match &mut self.previous {
