@@ -10,6 +10,7 @@
 mod evaluate;
 mod pipeline;
 mod plot_font;
+mod score;
 mod simulate;
 mod synthetic_job;
 mod validate;
@@ -43,6 +44,9 @@ enum Command {
     Simulate(simulate::SimulateArgs),
     /// Check a recording completely (every row and every image).
     Validate(validate::ValidateArgs),
+    /// Score a run's track.csv against every vehicle of a recording (GOSPA, MOTA,
+    /// IDF1, identity switches, per-vehicle MAE).
+    Score(score::ScoreArgs),
 }
 
 fn main() -> Result<()> {
@@ -62,5 +66,6 @@ fn main() -> Result<()> {
         Command::Evaluate(args) => evaluate::run(&args),
         Command::Simulate(args) => simulate::run(&args),
         Command::Validate(args) => validate::run(&args),
+        Command::Score(args) => score::run(&args),
     }
 }

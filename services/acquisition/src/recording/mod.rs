@@ -8,6 +8,7 @@ mod meta;
 mod reader;
 pub(crate) mod rows;
 mod stream_log;
+mod targets_truth;
 mod writer;
 
 pub use error::{CsvPlace, RecordingError};
@@ -23,11 +24,15 @@ pub use rows::{
     TELEMETRY_HEADER, TRUTH_HEADER,
 };
 pub use stream_log::StreamLog;
+pub use targets_truth::{
+    parse_targets_truth, read_targets_truth, TargetTruthRow, TargetsTruthWriter,
+    TRUTH_TARGETS_HEADER,
+};
 pub use writer::{ImageEncoding, RecordingWriter, TruthSample};
 
 pub const META_FILE: &str = "recording.toml";
 pub const TELEMETRY_FILE: &str = "telemetry.csv";
 pub const TRUTH_FILE: &str = "truth.csv";
-/// Every moving vehicle's truth (optional, for multi-target evaluation): accepted as the
-/// format lists it, not read yet.
+/// Every moving vehicle's truth (optional, for multi-target evaluation; the
+/// simulator writes it for a scene with moving traffic, `dualgeo score` reads it).
 pub const TRUTH_TARGETS_FILE: &str = "truth_targets.csv";

@@ -92,10 +92,10 @@ pub struct TruthRow {
 }
 
 /// Reads one CSV row at a time with its place, for error messages.
-struct Fields<'a> {
+pub(super) struct Fields<'a> {
     record: &'a csv::StringRecord,
     path: &'a Path,
-    line: u64,
+    pub(super) line: u64,
     header: &'static [&'static str],
 }
 
@@ -109,18 +109,18 @@ impl Fields<'_> {
         }
     }
 
-    fn error(&self, column: usize, message: impl Into<String>) -> RecordingError {
+    pub(super) fn error(&self, column: usize, message: impl Into<String>) -> RecordingError {
         RecordingError::Csv {
             place: self.place(column),
             message: message.into(),
         }
     }
 
-    fn text(&self, column: usize) -> &str {
+    pub(super) fn text(&self, column: usize) -> &str {
         self.record.get(column).unwrap_or("")
     }
 
-    fn uav(&self, column: usize) -> Result<Uav, RecordingError> {
+    pub(super) fn uav(&self, column: usize) -> Result<Uav, RecordingError> {
         match self.text(column) {
             "left" => Ok(Uav::Left),
             "right" => Ok(Uav::Right),
@@ -131,7 +131,7 @@ impl Fields<'_> {
         }
     }
 
-    fn frame(&self, column: usize) -> Result<u64, RecordingError> {
+    pub(super) fn frame(&self, column: usize) -> Result<u64, RecordingError> {
         self.text(column).parse().map_err(|_| {
             self.error(
                 column,
@@ -143,7 +143,7 @@ impl Fields<'_> {
         })
     }
 
-    fn number(&self, column: usize) -> Result<f64, RecordingError> {
+    pub(super) fn number(&self, column: usize) -> Result<f64, RecordingError> {
         let text = self.text(column);
         let v: f64 = text
             .parse()
@@ -154,7 +154,7 @@ impl Fields<'_> {
         Ok(v)
     }
 
-    fn optional_number(&self, column: usize) -> Result<Option<f64>, RecordingError> {
+    pub(super) fn optional_number(&self, column: usize) -> Result<Option<f64>, RecordingError> {
         if self.text(column).is_empty() {
             Ok(None)
         } else {
@@ -198,7 +198,7 @@ impl Fields<'_> {
     }
 }
 
-fn open_csv(path: &Path) -> Result<std::io::BufReader<std::fs::File>, RecordingError> {
+pub(super) fn open_csv(path: &Path) -> Result<std::io::BufReader<std::fs::File>, RecordingError> {
     let file = std::fs::File::open(path).map_err(|e| match e.kind() {
         std::io::ErrorKind::NotFound => RecordingError::MissingFile { path: path.into() },
         _ => RecordingError::io(path, e),
@@ -208,7 +208,7 @@ fn open_csv(path: &Path) -> Result<std::io::BufReader<std::fs::File>, RecordingE
 
 /// Reads CSV from `input` (errors name `path`), checks that its header is one of
 /// `headers` and hands each data row to `row` with its line.
-fn parse_csv<T>(
+pub(super) fn parse_csv<T>(
     input: impl Read,
     path: &Path,
     headers: &[&'static [&'static str]],

@@ -21,7 +21,7 @@ pub mod texture;
 pub use record::{record, record_flight, RecordSummary};
 pub use scenario::{Presets, SimConfig, TrafficCar};
 pub use scenario_args::ScenarioArgs;
-pub use simulator::{SimFrame, SimStep, Simulator};
+pub use simulator::{SimFrame, SimStep, Simulator, VehicleTruth};
 
 use crate::recording::RecordingError;
 

@@ -2,12 +2,13 @@
 //! camera) or a flight (videos + tlogs; a tilted or gimballed camera's angles as
 //! GIMBAL_DEVICE_ATTITUDE_STATUS), with truth.
 
-use super::simulator::{SimStep, Simulator};
+use super::simulator::{SimStep, Simulator, VehicleTruth};
 use super::SimError;
 use crate::flight::video::VideoCodec;
 use crate::flight::writer::FlightWriter;
 use crate::recording::{
-    CameraMeta, ImageEncoding, MountAngles, RecordingMeta, RecordingWriter, TruthRow, TruthSample,
+    CameraMeta, ImageEncoding, MountAngles, RecordingMeta, RecordingWriter, TargetTruthRow,
+    TargetsTruthWriter, TruthRow, TruthSample,
 };
 use opencv::core as cv;
 use opencv::prelude::*;
@@ -30,9 +31,58 @@ trait PairSink {
         left: &cv::Mat,
         right: &cv::Mat,
     ) -> Result<(), SimError>;
+
+    /// Every moving vehicle as each UAV's image of `step` shows it, for a sink that
+    /// keeps them (a recording of a scene with moving traffic: truth_targets.csv).
+    fn write_vehicles(
+        &mut self,
+        _step: &SimStep,
+        _vehicles: [Vec<VehicleTruth>; 2],
+    ) -> Result<(), SimError> {
+        Ok(())
+    }
+
+    /// Whether [`PairSink::write_vehicles`] keeps anything (else it is not computed).
+    fn wants_vehicles(&self) -> bool {
+        false
+    }
 }
 
-impl PairSink for RecordingWriter {
+/// A recording being written, with its truth_targets.csv when the scene has moving
+/// traffic.
+struct RecordingSink {
+    writer: RecordingWriter,
+    vehicles: Option<TargetsTruthWriter>,
+}
+
+impl PairSink for RecordingSink {
+    fn wants_vehicles(&self) -> bool {
+        self.vehicles.is_some()
+    }
+
+    fn write_vehicles(
+        &mut self,
+        step: &SimStep,
+        vehicles: [Vec<VehicleTruth>; 2],
+    ) -> Result<(), SimError> {
+        let Some(w) = self.vehicles.as_mut() else {
+            return Ok(());
+        };
+        for (frame, seen) in step.frames.iter().zip(vehicles) {
+            for v in seen {
+                w.write(&TargetTruthRow {
+                    uav: frame.uav,
+                    frame: frame.seq,
+                    t_s: frame.t_s,
+                    target_id: v.id,
+                    target: v.point,
+                    target_px: v.px,
+                })?;
+            }
+        }
+        Ok(())
+    }
+
     fn write_pair(
         &mut self,
         step: &SimStep,
@@ -40,7 +90,7 @@ impl PairSink for RecordingWriter {
         right: &cv::Mat,
     ) -> Result<(), SimError> {
         // PNG encoding costs more than rendering; encode both views at once.
-        let writer = &*self;
+        let writer = &self.writer;
         let (png_left, png_right) = std::thread::scope(|s| {
             let l = s.spawn(|| writer.encode(Uav::Left, left));
             let r = writer.encode(Uav::Right, right);
@@ -55,7 +105,7 @@ impl PairSink for RecordingWriter {
                 gimbal: frame.gimbal.map(|g| g.true_deg),
             };
             match frame.gimbal {
-                Some(g) => self.write_gimbal_frame(
+                Some(g) => self.writer.write_gimbal_frame(
                     frame.uav,
                     frame.t_s,
                     frame.body_measured,
@@ -63,7 +113,7 @@ impl PairSink for RecordingWriter {
                     &png,
                     Some(&truth),
                 )?,
-                None => self.write_encoded_frame(
+                None => self.writer.write_encoded_frame(
                     frame.uav,
                     frame.t_s,
                     frame.body_measured,
@@ -151,9 +201,17 @@ pub fn record(
             meta.set_fixed_mount(uav, angles);
         }
     }
-    let mut writer = RecordingWriter::create(out, &meta, true)?.with_encoding(encoding);
-    let summary = render_into(sim, &mut writer, progress)?;
-    writer.finish()?;
+    let writer = RecordingWriter::create(out, &meta, true)?.with_encoding(encoding);
+    let moving_traffic = config.traffic.iter().any(|car| car.speed_factor > 0.0);
+    let vehicles = moving_traffic
+        .then(|| TargetsTruthWriter::create(out))
+        .transpose()?;
+    let mut sink = RecordingSink { writer, vehicles };
+    let summary = render_into(sim, &mut sink, progress)?;
+    sink.writer.finish()?;
+    if let Some(w) = sink.vehicles {
+        w.finish()?;
+    }
     Ok(summary)
 }
 
@@ -218,6 +276,10 @@ fn render_into(
             sim.render_pair(&step, l, r, stride);
         }
         let t1 = Instant::now();
+        if sink.wants_vehicles() {
+            let seen = [Uav::Left, Uav::Right].map(|uav| sim.moving_vehicles(&step, uav));
+            sink.write_vehicles(&step, seen)?;
+        }
         sink.write_pair(&step, &left, &right)?;
         summary.target_outside +=
             step.frames.iter().filter(|f| f.target_px.is_none()).count() as u64;

@@ -126,6 +126,8 @@ enum Material {
     },
     TrafficTop {
         bgr: [u8; 3],
+        /// Which car of the traffic list (truth for scoring several targets).
+        car: u32,
     },
     TrafficSide {
         bgr: [u8; 3],
@@ -196,8 +198,11 @@ impl Renderer {
         self.label.clear();
         self.label.resize(w * h, GROUND_LABEL);
         self.collect_faces(city, vehicle, view);
-        for t in traffic {
-            let top = Material::TrafficTop { bgr: t.top_bgr };
+        for (car, t) in traffic.iter().enumerate() {
+            let top = Material::TrafficTop {
+                bgr: t.top_bgr,
+                car: car as u32,
+            };
             let bgr = t.top_bgr;
             let zg = city.config.ground_z_m;
             self.push_box(&t.body, zg, view.position, top, |light| {
@@ -221,6 +226,18 @@ impl Renderer {
                 Material::VehicleTop { .. } => Surface::VehicleTop,
                 Material::VehicleSide { .. } => Surface::VehicleSide,
                 Material::TrafficTop { .. } | Material::TrafficSide { .. } => Surface::Traffic,
+            },
+        }
+    }
+
+    /// Which traffic car's top the pixel of the last render shows (its index in the
+    /// traffic list), if any.
+    pub fn traffic_top(&self, u: usize, v: usize) -> Option<usize> {
+        match self.label[v * self.width + u] {
+            GROUND_LABEL => None,
+            i => match self.faces[i as usize].material {
+                Material::TrafficTop { car, .. } => Some(car as usize),
+                _ => None,
             },
         }
     }
@@ -472,7 +489,7 @@ fn shade_face(city: &City, material: &Material, p: Vector3<f64>, zg: f64) -> [f3
         }
         Material::VehicleTop { bgr } => bgr.map(f32::from),
         Material::VehicleSide { bgr, light } => bgr.map(|c| c as f32 * light),
-        Material::TrafficTop { bgr } => bgr.map(f32::from),
+        Material::TrafficTop { bgr, .. } => bgr.map(f32::from),
         // Sides darkened like the target's (140/214 of the top), then lit.
         Material::TrafficSide { bgr, light } => bgr.map(|c| c as f32 * 0.65 * light),
     }

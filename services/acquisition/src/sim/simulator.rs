@@ -47,6 +47,17 @@ pub struct SimFrame {
     pub gimbal: Option<GimbalAngles>,
 }
 
+/// One moving vehicle as one image shows it (truth_targets.csv; evaluation only).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct VehicleTruth {
+    /// 0: the target; 1 + index in the scenario's traffic list: a traffic car.
+    pub id: u32,
+    /// The centre of its top face, ENU metres.
+    pub point: [f64; 3],
+    /// Its projection into the image; `None` outside it or hidden.
+    pub px: Option<[f64; 2]>,
+}
+
 /// A gimbal's angles in one frame, degrees (yaw, pitch, roll of G relative to the body).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct GimbalAngles {
@@ -361,10 +372,23 @@ impl Simulator {
     /// Truth, for scoring only.
     pub fn target_visible(&self, step: &SimStep, uav: Uav) -> bool {
         let frame = &step.frames[uav.index()];
-        if frame.target_px.is_none() {
-            return false;
-        }
-        let Some([u, v]) = frame.view.project(&Point3::from(frame.target)) else {
+        frame.target_px.is_some()
+            && self.top_visible(&frame.view, uav, &Point3::from(frame.target), |r, u, v| {
+                r.surface(u, v) == Surface::VehicleTop
+            })
+    }
+
+    /// Whether the undistorted projection of `point` into `uav`'s last render lands on
+    /// a pixel `shows` accepts (the render's own canvas, a distorted camera's margin
+    /// included).
+    fn top_visible(
+        &self,
+        view: &CameraView,
+        uav: Uav,
+        point: &Point3<f64>,
+        shows: impl Fn(&Renderer, usize, usize) -> bool,
+    ) -> bool {
+        let Some([u, v]) = view.project(point) else {
             return false;
         };
         let (u, v, w, h) = match &self.lens {
@@ -374,13 +398,52 @@ impl Simulator {
                 map.canvas[0],
                 map.canvas[1],
             ),
-            None => (u, v, frame.view.width as usize, frame.view.height as usize),
+            None => (u, v, view.width as usize, view.height as usize),
         };
         let (u, v) = (u.round(), v.round());
         if u < 0.0 || v < 0.0 || u as usize >= w || v as usize >= h {
             return false;
         }
-        self.renderers[uav.index()].surface(u as usize, v as usize) == Surface::VehicleTop
+        shows(&self.renderers[uav.index()], u as usize, v as usize)
+    }
+
+    /// Every moving vehicle at `step` as `uav`'s last rendered image (of `step`) shows it, for
+    /// `truth_targets.csv` (evaluation only): id 0 is the target, a traffic car is 1 +
+    /// its index in the scenario's traffic list (parked cars, `speed_factor = 0`, are
+    /// left out as the format says). The pixel is the top centre's projection, `None`
+    /// outside the image or hidden.
+    pub fn moving_vehicles(&self, step: &SimStep, uav: Uav) -> Vec<VehicleTruth> {
+        let frame = &step.frames[uav.index()];
+        let target = VehicleTruth {
+            id: 0,
+            point: frame.target,
+            px: frame.target_px.filter(|_| self.target_visible(step, uav)),
+        };
+        let ground_z = self.config.city.ground_z_m;
+        let (w, h) = (frame.view.width as f64, frame.view.height as f64);
+        let lens = self.distortion();
+        let traffic = self.config.traffic.iter().zip(&self.traffic).enumerate();
+        let cars = traffic
+            .filter(|(_, (car, _))| car.speed_factor > 0.0)
+            .map(|(i, (_, b))| {
+                let top = b.body.top_centre(ground_z);
+                let px = frame
+                    .view
+                    .project(&top)
+                    .map(|[u, v]| lens.distort_pixel(&frame.view.intrinsics, u, v))
+                    .filter(|p| p[0] >= 0.0 && p[1] >= 0.0 && p[0] <= w - 1.0 && p[1] <= h - 1.0)
+                    .filter(|_| {
+                        self.top_visible(&frame.view, uav, &top, |r, u, v| {
+                            r.traffic_top(u, v) == Some(i)
+                        })
+                    });
+                VehicleTruth {
+                    id: i as u32 + 1,
+                    point: [top.x, top.y, top.z],
+                    px,
+                }
+            });
+        std::iter::once(target).chain(cars).collect()
     }
 
     /// The renderer that drew `uav`'s last image (its per-pixel surface labels).
