@@ -124,10 +124,30 @@ impl FrameHeader {
     }
 }
 
+/// Most other objects a [`DetectionMsg`] carries besides the target.
+pub const MAX_CANDIDATES: usize = 16;
+
+/// An object a detector found in a frame besides the target: every blob of the
+/// configured colour, every mover (several targets).
+#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
+#[repr(C)]
+#[type_name("dualgeo::Candidate/v1")]
+pub struct Candidate {
+    /// x, y, width, height, pixels.
+    pub bbox: [f64; 4],
+    /// Its point (u, v), pixels, as the target's `centre`.
+    pub centre: [f64; 2],
+    pub confidence: f32,
+    /// The frame's colour at `centre` (BGR, median of 3 × 3): appearance for
+    /// associating it across the two views.
+    pub bgr: [u8; 3],
+    pub _reserved: u8,
+}
+
 /// The detector's answer for one frame.
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
 #[repr(C)]
-#[type_name("dualgeo::DetectionMsg/v1")]
+#[type_name("dualgeo::DetectionMsg/v2")]
 pub struct DetectionMsg {
     pub seq: u64,
     pub capture_ns: u64,
@@ -137,12 +157,25 @@ pub struct DetectionMsg {
     pub uav: u8,
     /// 1 when the target was found; the fields below are meaningful only then.
     pub found: u8,
-    pub _reserved: [u8; 6],
+    /// Valid entries of `candidates`.
+    pub candidate_count: u8,
+    pub _reserved: u8,
+    /// Candidates found beyond [`MAX_CANDIDATES`] and left out (the smallest).
+    pub candidates_dropped: u32,
     /// x, y, width, height, pixels.
     pub bbox: [f64; 4],
     /// Target pixel (u, v).
     pub centre: [f64; 2],
     pub confidence: f64,
+    /// The other objects in the frame (the target is not among them).
+    pub candidates: [Candidate; MAX_CANDIDATES],
+}
+
+impl DetectionMsg {
+    /// The valid candidates.
+    pub fn candidates(&self) -> &[Candidate] {
+        &self.candidates[..usize::from(self.candidate_count).min(MAX_CANDIDATES)]
+    }
 }
 
 /// One image of an observation set: the measured pose and the target's pixel.
@@ -306,7 +339,11 @@ mod tests {
 
     #[test]
     fn message_sizes_are_fixed() {
-        assert_eq!(std::mem::size_of::<DetectionMsg>(), 96);
+        assert_eq!(std::mem::size_of::<Candidate>(), 56);
+        assert_eq!(
+            std::mem::size_of::<DetectionMsg>(),
+            96 + 56 * MAX_CANDIDATES
+        );
         // 4·8 + 4·4 + 3·8 + 2·8 + 16·8 + 8 + 2·8 + 8 + 8 + 8: no padding (the fuzz
         // targets read it from arbitrary bytes).
         assert_eq!(std::mem::size_of::<EstimateMsg>(), 264);

@@ -37,16 +37,32 @@ pub enum DetectorKind {
 }
 
 /// The whole `[detection]` section.
-#[derive(Debug, Clone, PartialEq, Default, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(try_from = "toml::Table")]
 pub struct DetectionConfig {
     pub kind: DetectorKind,
+    /// `candidates`: publish every other object found (every blob of the colour, every
+    /// mover) beside the target, for several targets (default true; the learned
+    /// detector publishes none yet).
+    pub candidates: bool,
     /// The colour detector's settings (the section's own keys).
     pub colour: ColourBlobConfig,
     /// `[detection.yolo]`, required with `kind = "yolo"`.
     pub yolo: Option<YoloConfig>,
     /// `[detection.motion]` (defaults when absent).
     pub motion: MotionConfig,
+}
+
+impl Default for DetectionConfig {
+    fn default() -> Self {
+        Self {
+            kind: DetectorKind::default(),
+            candidates: true,
+            colour: ColourBlobConfig::default(),
+            yolo: None,
+            motion: MotionConfig::default(),
+        }
+    }
 }
 
 impl TryFrom<toml::Table> for DetectionConfig {
@@ -58,6 +74,12 @@ impl TryFrom<toml::Table> for DetectionConfig {
                 .try_into::<DetectorKind>()
                 .map_err(|e| format!("kind: {e} (expected \"colour\", \"yolo\" or \"motion\")"))?,
             None => DetectorKind::default(),
+        };
+        let candidates = match table.remove("candidates") {
+            Some(v) => v
+                .try_into::<bool>()
+                .map_err(|e| format!("candidates: {e} (expected true or false)"))?,
+            None => true,
         };
         let yolo = match table.remove("yolo") {
             Some(v) => Some(
@@ -85,6 +107,7 @@ impl TryFrom<toml::Table> for DetectionConfig {
             .map_err(|e| e.to_string())?;
         Ok(Self {
             kind,
+            candidates,
             colour,
             yolo,
             motion,
@@ -106,7 +129,16 @@ mod tests {
         assert_eq!(c.kind, DetectorKind::Colour);
         assert_eq!(c.colour.saturation_min, 120);
         assert!(c.yolo.is_none());
+        assert!(c.candidates);
         assert_eq!(parse("").unwrap(), DetectionConfig::default());
+        assert!(
+            !parse("[detection]\ncandidates = false\n")
+                .unwrap()
+                .candidates
+        );
+        assert!(parse("[detection]\ncandidates = 3\n")
+            .unwrap_err()
+            .contains("candidates"));
     }
 
     #[test]

@@ -21,7 +21,9 @@
 //! `model_found`, `tracked`, `track_lost`, and the histogram `model` (µs per model run,
 //! on its own thread). With `kind = "motion"` (`detection::motion`): `movers` (blobs
 //! moving against the ground, summed over frames), `no_ground` (frames whose ground
-//! motion was not measured), `acquired` and `track_lost`.
+//! motion was not measured), `acquired` and `track_lost`. With `[detection] candidates`
+//! (default): `candidates` (other objects published beside the target, summed over
+//! frames), `candidates_overflow` (left out for room) and `candidates_failed`.
 
 use anyhow::{Context, Result};
 use clap::Parser;
@@ -66,6 +68,7 @@ fn run() -> Result<()> {
         .map_err(|e| Permanent::new("[realtime]", e))?;
     let config: DetectionConfig = load_section(args.service.config.as_deref(), "detection")?;
     let gate_config = config.colour.gate;
+    let candidates = config.candidates;
     let detector = Chosen::new(config, args.service.flow_controlled)
         .map_err(|e| Permanent::new("[detection] configuration", e))?;
     let endpoint = Endpoint::new(&args.service.run_id, "detection")?;
@@ -79,6 +82,8 @@ fn run() -> Result<()> {
     let listener = endpoint.listener(Stage::Detection)?;
     let mut stage = Detecting {
         detector,
+        candidates,
+        found_all: Vec::new(),
         predictions: RecentPredictions::default(),
         gate_config,
         stats: StageStats::new("detection"),
@@ -159,6 +164,10 @@ impl Chosen {
 /// The service's state between wake-ups.
 struct Detecting {
     detector: Chosen,
+    /// `[detection] candidates`: publish every other object found.
+    candidates: bool,
+    /// Everything the detector found in the frame (reused).
+    found_all: Vec<detection::Detection>,
     predictions: RecentPredictions,
     gate_config: detection::prediction_gate::GateConfig,
     stats: StageStats,
@@ -196,18 +205,19 @@ impl Detecting {
             Verdict::OnTime => {}
         }
         let stats = &mut self.stats;
-        let detected = frame_mat(&header, payload).map(|mat| match &mut self.detector {
+        let mat = frame_mat(&header, payload);
+        let detected = mat.as_ref().map(|mat| match &mut self.detector {
             Chosen::Colour(d) => d.detect_gated(
                 uav,
                 header.t_s,
-                &mat,
+                mat,
                 gate_of(&self.predictions, &header, &self.gate_config, stats),
             ),
             // The learned detector is not gated by the filter's prediction yet.
-            Chosen::Learned(d) => d.detect(uav, &mat),
+            Chosen::Learned(d) => d.detect(uav, mat),
             Chosen::Motion(d) => d.detect(
                 uav,
-                &mat,
+                mat,
                 gate_of(&self.predictions, &header, &self.gate_config, stats),
             ),
         });
@@ -266,12 +276,50 @@ impl Detecting {
             msg.centre = d.centre;
             msg.confidence = d.confidence as f64;
         }
+        if let (true, Ok(mat)) = (self.candidates, &mat) {
+            self.publish_candidates(&mut msg, mat);
+        }
         let done = monotonic_ns();
-        stats.record("compute", elapsed_us(start, done));
+        self.stats.record("compute", elapsed_us(start, done));
         self.trace.span("detect", header.seq, uav_id, start, done);
         msg.published_ns = monotonic_ns();
         publisher.send_copy(msg).context("publish detection")?;
         Ok(())
+    }
+}
+
+impl Detecting {
+    /// Puts every other object the detector found in `mat` into `msg` (counted
+    /// `candidates`, and `candidates_overflow` beyond the message's room). A failure
+    /// leaves the message without candidates (counted `candidates_failed`).
+    fn publish_candidates(&mut self, msg: &mut DetectionMsg, mat: &opencv::core::Mat) {
+        let found = &mut self.found_all;
+        found.clear();
+        let listed = match &mut self.detector {
+            Chosen::Colour(d) => d.candidates(mat, found),
+            Chosen::Motion(d) => {
+                found.extend(d.last_movers().iter().map(|m| detection::Detection {
+                    bbox: m.bbox,
+                    centre: m.centre,
+                    confidence: 1.0,
+                }));
+                Ok(())
+            }
+            // The model's other boxes are not kept yet.
+            Chosen::Learned(_) => Ok(()),
+        };
+        match listed.and_then(|()| detection::candidates::fill(msg, found, mat)) {
+            Ok(dropped) => {
+                self.stats
+                    .count("candidates", u64::from(msg.candidate_count));
+                self.stats.count("candidates_overflow", u64::from(dropped));
+            }
+            Err(e) => {
+                tracing::warn!(seq = msg.seq, "candidates not listed: {e}");
+                msg.candidate_count = 0;
+                self.stats.count("candidates_failed", 1);
+            }
+        }
     }
 }
 

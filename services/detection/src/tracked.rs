@@ -198,6 +198,16 @@ impl TrackedDetector {
         }
     }
 
+    /// Every blob of the target's colour in the frame just detected (several targets;
+    /// see [`ColourBlobDetector::all_blobs`]).
+    pub fn candidates(
+        &mut self,
+        frame: &cv::Mat,
+        out: &mut Vec<Detection>,
+    ) -> Result<(), DetectError> {
+        self.detector.all_blobs(frame, out)
+    }
+
     /// The counts since the last call, and starts again from zero.
     pub fn take_counts(&mut self) -> TrackCounts {
         std::mem::take(&mut self.counts)

@@ -72,25 +72,33 @@ pub fn camera_pose_message(time: &Value, h: &FrameHeader) -> Option<Value> {
     }))
 }
 
-/// foxglove.ImageAnnotations of a detection: its box as a closed polygon; no
-/// annotation when the target was not found (or the box is not finite).
+/// foxglove.ImageAnnotations of a detection: the target's box as a closed polygon
+/// (red; none when it was not found or the box is not finite) and every other object
+/// the detector published (thin, yellow).
 pub fn detection_message(time: &Value, d: &DetectionMsg) -> Value {
-    let [x, y, w, h] = d.bbox;
-    let found = d.found == 1 && d.bbox.iter().all(|v| v.is_finite());
-    let points = if found {
-        let corners = [(x, y), (x + w, y), (x + w, y + h), (x, y + h)];
-        vec![json!({
-            "timestamp": time,
-            "type": 2, // LINE_LOOP
-            "points": corners.map(|(x, y)| json!({"x": x, "y": y})),
-            "outline_color": {"r": 1.0, "g": 0.2, "b": 0.1, "a": 1.0},
-            "outline_colors": [],
-            "fill_color": {"r": 0.0, "g": 0.0, "b": 0.0, "a": 0.0},
-            "thickness": 2.0,
-        })]
-    } else {
-        Vec::new()
+    let outline = |bbox: [f64; 4], rgb: [f64; 3], thickness: f64| -> Option<Value> {
+        let [x, y, w, h] = bbox;
+        bbox.iter().all(|v| v.is_finite()).then(|| {
+            let corners = [(x, y), (x + w, y), (x + w, y + h), (x, y + h)];
+            json!({
+                "timestamp": time,
+                "type": 2, // LINE_LOOP
+                "points": corners.map(|(x, y)| json!({"x": x, "y": y})),
+                "outline_color": {"r": rgb[0], "g": rgb[1], "b": rgb[2], "a": 1.0},
+                "outline_colors": [],
+                "fill_color": {"r": 0.0, "g": 0.0, "b": 0.0, "a": 0.0},
+                "thickness": thickness,
+            })
+        })
     };
+    let target = (d.found == 1)
+        .then(|| outline(d.bbox, [1.0, 0.2, 0.1], 2.0))
+        .flatten();
+    let others = d
+        .candidates()
+        .iter()
+        .filter_map(|c| outline(c.bbox, [1.0, 0.85, 0.1], 1.0));
+    let points: Vec<Value> = target.into_iter().chain(others).collect();
     json!({"circles": [], "points": points, "texts": []})
 }
 
@@ -266,6 +274,15 @@ mod tests {
         d.found = 1;
         d.bbox[0] = f64::NAN;
         assert_eq!(detection_message(&time(), &d)["points"], json!([]));
+        // Other objects follow the target's box, thinner.
+        d.bbox[0] = 10.0;
+        d.candidate_count = 1;
+        d.candidates[0].bbox = [30.0, 20.0, 4.0, 6.0];
+        d.candidates[1].bbox = [50.0, 20.0, 4.0, 6.0]; // beyond the count: not drawn
+        let m = detection_message(&time(), &d);
+        assert_eq!(m["points"].as_array().unwrap().len(), 2);
+        assert_eq!(m["points"][1]["points"][0], json!({"x": 30.0, "y": 20.0}));
+        assert_eq!(m["points"][1]["thickness"], 1.0);
     }
 
     #[test]
