@@ -125,7 +125,7 @@ fn pipeline_on_a_recording_and_a_corrupt_image() {
     assert!(report["throughput_hz"].as_f64().unwrap() > 1.0);
 
     let track = std::fs::read_to_string(dir.join("out/track.csv")).unwrap();
-    assert!(track.starts_with("t_s,pair_seq,x_m,y_m,z_m,lat_deg,lon_deg,alt_m,yaw_bias_left_deg,yaw_bias_right_deg,images_used,iterations,h_acc_m,v_acc_m,quality\n"));
+    assert!(track.starts_with("t_s,pair_seq,x_m,y_m,z_m,lat_deg,lon_deg,alt_m,yaw_bias_left_deg,yaw_bias_right_deg,images_used,iterations,h_acc_m,v_acc_m,quality,track_id\n"));
     assert_eq!(track.lines().count() as u64, estimates + 1);
     let geo = json(&dir.join("out/track.geojson"));
     let first = &geo["features"][0]["geometry"]["coordinates"][0];

@@ -4,6 +4,7 @@
 //! C_w^c), the shared-memory message layouts and the service names.
 
 pub mod alloc_count;
+pub mod assignment;
 pub mod checkpoint;
 pub mod clock;
 pub mod conventions;

@@ -202,11 +202,52 @@ pub struct ObservationEntry {
 /// Most images an observation set carries (N ≤ 16 per UAV).
 pub const MAX_OBSERVATIONS: usize = 32;
 
+/// Most other targets an observation set carries besides the target.
+pub const MAX_OTHER_TARGETS: usize = 8;
+
+/// Another vehicle both current images show (several targets): its pixels in the
+/// current images (associated across the views) and transferred into the set's past
+/// images through the same fundamental matrices as the target's. Pixels are ideal
+/// pinhole ones, as the entries'.
+#[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
+#[repr(C)]
+#[type_name("dualgeo::OtherTarget/v1")]
+pub struct OtherTarget {
+    /// In the current left and right images (`entries[0]`, `entries[1]`).
+    pub current: [[f64; 2]; 2],
+    /// `past[k]` is its pixel in `entries[2 + k]`, valid where bit k of `past_valid`
+    /// is set (a transfer can fail for one vehicle and not another).
+    pub past: [[f64; 2]; MAX_OBSERVATIONS - 2],
+    pub past_valid: u32,
+    /// Its colour in the current left and right images (BGR).
+    pub bgr: [[u8; 3]; 2],
+    pub _reserved: [u8; 6],
+}
+
+impl Default for OtherTarget {
+    fn default() -> Self {
+        Self {
+            current: [[0.0; 2]; 2],
+            past: [[0.0; 2]; MAX_OBSERVATIONS - 2],
+            past_valid: 0,
+            bgr: [[0; 3]; 2],
+            _reserved: [0; 6],
+        }
+    }
+}
+
+impl OtherTarget {
+    /// Its pixel in past image `k` (`entries[2 + k]`), if transferred.
+    pub fn past_pixel(&self, k: usize) -> Option<[f64; 2]> {
+        (k < MAX_OBSERVATIONS - 2 && self.past_valid & (1 << k) != 0).then(|| self.past[k])
+    }
+}
+
 /// Matching's output for one stereo pair: `entries[0]` is the current left image,
 /// `entries[1]` the current right one, then `count − 2` past images.
 #[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
 #[repr(C)]
-#[type_name("dualgeo::ObservationSetMsg/v4")]
+#[type_name("dualgeo::ObservationSetMsg/v5")]
 pub struct ObservationSetMsg {
     /// Index of this set among the sets matching published (gaps = sets lost).
     pub set_seq: u64,
@@ -218,6 +259,12 @@ pub struct ObservationSetMsg {
     /// Past images that gave no corresponding point.
     pub rejected_past: u32,
     pub entries: [ObservationEntry; MAX_OBSERVATIONS],
+    /// Valid entries of `others`.
+    pub other_count: u32,
+    /// Other vehicles associated across the views but left out for room.
+    pub others_dropped: u32,
+    /// Other vehicles both current images show, through the same images.
+    pub others: [OtherTarget; MAX_OTHER_TARGETS],
 }
 
 impl Default for ObservationSetMsg {
@@ -231,6 +278,9 @@ impl Default for ObservationSetMsg {
             count: 0,
             rejected_past: 0,
             entries: [ObservationEntry::default(); MAX_OBSERVATIONS],
+            other_count: 0,
+            others_dropped: 0,
+            others: [OtherTarget::default(); MAX_OTHER_TARGETS],
         }
     }
 }
@@ -240,12 +290,40 @@ impl ObservationSetMsg {
     pub fn entries(&self) -> &[ObservationEntry] {
         &self.entries[..(self.count as usize).min(MAX_OBSERVATIONS)]
     }
+
+    /// The valid other targets.
+    pub fn others(&self) -> &[OtherTarget] {
+        &self.others[..(self.other_count as usize).min(MAX_OTHER_TARGETS)]
+    }
+}
+
+/// Most other vehicles' tracks an [`EstimateMsg`] carries.
+pub const MAX_TRACKS: usize = 8;
+
+/// Another vehicle's confirmed track at one pair (several targets).
+#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
+#[repr(C)]
+#[type_name("dualgeo::TrackEstimate/v1")]
+pub struct TrackEstimate {
+    /// Stable while the track lives; from 1 (0 is the target).
+    pub id: u32,
+    /// 1 tracking (a fix this pair), 2 coasting (its prediction), as the target's
+    /// `quality`.
+    pub quality: u32,
+    /// (x, y, z), world ENU metres.
+    pub position: [f64; 3],
+    /// Covariance of (x, y), m², row-major.
+    pub covariance_xy: [f64; 4],
+    /// Standard error of z, metres.
+    pub altitude_std_error_m: f64,
+    /// (east, north), m/s.
+    pub velocity_mps: [f64; 2],
 }
 
 /// Geolocation's output for one stereo pair.
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
 #[repr(C)]
-#[type_name("dualgeo::EstimateMsg/v2")]
+#[type_name("dualgeo::EstimateMsg/v3")]
 pub struct EstimateMsg {
     pub pair_seq: u64,
     pub capture_ns: u64,
@@ -277,6 +355,17 @@ pub struct EstimateMsg {
     /// (no ray of the current pair taken: the filter's prediction). 64 bits: the
     /// message has no padding.
     pub quality: u64,
+    /// Valid entries of `tracks` (64 bits: no padding).
+    pub track_count: u64,
+    /// The other vehicles' confirmed tracks, the yaw biases shared with the target.
+    pub tracks: [TrackEstimate; MAX_TRACKS],
+}
+
+impl EstimateMsg {
+    /// The valid tracks of other vehicles.
+    pub fn tracks(&self) -> &[TrackEstimate] {
+        &self.tracks[..(self.track_count as usize).min(MAX_TRACKS)]
+    }
 }
 
 /// Why an [`EstimateMsg`] carries no estimate.
@@ -346,11 +435,16 @@ mod tests {
         );
         // 4·8 + 4·4 + 3·8 + 2·8 + 16·8 + 8 + 2·8 + 8 + 8 + 8: no padding (the fuzz
         // targets read it from arbitrary bytes).
-        assert_eq!(std::mem::size_of::<EstimateMsg>(), 264);
+        assert_eq!(std::mem::size_of::<TrackEstimate>(), 88);
+        assert_eq!(
+            std::mem::size_of::<EstimateMsg>(),
+            264 + 8 + 88 * MAX_TRACKS
+        );
         assert_eq!(std::mem::size_of::<ObservationEntry>(), 120);
+        assert_eq!(std::mem::size_of::<OtherTarget>(), 32 + 16 * 30 + 16);
         assert_eq!(
             std::mem::size_of::<ObservationSetMsg>(),
-            48 + 120 * MAX_OBSERVATIONS
+            48 + 120 * MAX_OBSERVATIONS + 8 + 528 * MAX_OTHER_TARGETS
         );
         let set = ObservationSetMsg {
             count: 99,

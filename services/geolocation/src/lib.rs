@@ -11,6 +11,7 @@
 //! | the altitude/regression iteration | [`iteration`] ([`geolocate`]) |
 //! | Section 2.3, eq. (29)–(32): consistency filter | [`consistency`] |
 //! | Section 3.1: the one-shot baseline | [`one_shot`] |
+//! | several targets with the shared yaw biases (beyond the paper) | [`shared_bias`], [`tracks`] |
 //! | Section 3.1's scenario and eq. (33)–(34) | [`synthetic`], [`evaluation`] |
 //!
 //! Units: metres, pixels, radians inside; degrees only in [`EstimatorConfig`] and in
@@ -28,11 +29,14 @@ pub mod iteration;
 pub mod joint;
 pub mod observation;
 pub mod one_shot;
+pub mod others_message;
 pub mod regression;
 pub mod set_message;
+pub mod shared_bias;
 pub mod synthetic;
 pub mod temporal;
 pub mod temporal_snapshot;
+pub mod tracks;
 
 pub use config::{EstimatorConfig, EstimatorMethod, NoiseModel};
 pub use configured::{estimate_set, SetEstimate};

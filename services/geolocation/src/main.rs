@@ -16,10 +16,17 @@
 //! `estimates`, `sets_lost`, `bad_input`, `rejected.<reason>`, `resumed`,
 //! `checkpoint_refused`, `checkpoint_failed`, `stale_sets`, `estimates_late` (published
 //! more than a frame period after the pair's moment; `shared_types::deadline`).
+//!
+//! Several targets (`[tracks]`, on by default): the set's other vehicles are located
+//! with the target's yaw biases and tracked (`geolocation::others_message`, its
+//! counters); the confirmed tracks ride in the estimate message. They are not
+//! checkpointed: a restarted service starts them again with new ids.
 
 use anyhow::{Context, Result};
 use clap::Parser;
+use geolocation::others_message::add_tracks;
 use geolocation::set_message::{estimate_message, is_stale, Resume, CHECKPOINT_KIND};
+use geolocation::tracks::{TrackConfig, Tracks};
 use geolocation::{EstimatorConfig, EstimatorMethod, TemporalEstimator};
 use shared_types::checkpoint;
 use shared_types::clock::{elapsed_us, monotonic_ns};
@@ -88,6 +95,9 @@ fn run() -> Result<()> {
     config
         .validate()
         .map_err(|e| Permanent::new("[estimator] configuration", e))?;
+    let track_config: TrackConfig = load_section(args.service.config.as_deref(), "tracks")?;
+    let mut tracks =
+        Tracks::new(track_config).map_err(|e| Permanent::new("[tracks] configuration", e))?;
     let endpoint = Endpoint::new(&args.service.run_id, "geolocation")?;
     let subscriber = endpoint.subscriber::<ObservationSetMsg>(Topic::Observations)?;
     let publisher = endpoint.publisher::<EstimateMsg>(Topic::Estimates)?;
@@ -129,6 +139,9 @@ fn run() -> Result<()> {
                 continue;
             }
             let mut msg = estimate_message(set, &config, temporal.as_mut(), &mut stats);
+            if track_config.enabled {
+                add_tracks(set, &mut msg, &mut tracks, &config, &mut stats);
+            }
             drop(sample);
             let done = monotonic_ns();
             stats.record("compute", elapsed_us(start, done));

@@ -52,9 +52,42 @@ pub fn solve_regression(
     yaw_bias: [f64; 2],
     config: &EstimatorConfig,
 ) -> Result<RegressionSolution, EstimatorError> {
+    solve_regression_with_prior(observations, rays, z_target, yaw_bias, None, config)
+}
+
+/// Prior knowledge of the bias update Δ = δψ − δψ⁽ⁿ⁾: Δ ~ N(`mean`, `information`⁻¹).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct BiasPrior {
+    /// rad⁻².
+    pub information: Matrix2<f64>,
+    /// rad.
+    pub mean: Vector2<f64>,
+}
+
+/// [`solve_regression`] with prior knowledge of the biases (several targets: the
+/// biases the target's filter estimated): the prior's rows `Δ = mean`, weighted by its
+/// information, join eq. (13)'s, so the bias update stays near the prior and the
+/// covariance of (x_P, y_P) carries the biases' uncertainty.
+pub fn solve_regression_with_prior(
+    observations: &[Observation],
+    rays: &[PreparedRay],
+    z_target: f64,
+    yaw_bias: [f64; 2],
+    prior: Option<BiasPrior>,
+    config: &EstimatorConfig,
+) -> Result<RegressionSolution, EstimatorError> {
     let mut normal = Matrix4::<f64>::zeros();
     let mut rhs = Vector4::<f64>::zeros();
     let mut bb = 0.0;
+    if let Some(p) = prior {
+        normal
+            .fixed_view_mut::<2, 2>(2, 2)
+            .copy_from(&p.information);
+        let pulled = p.information * p.mean;
+        rhs[2] = pulled.x;
+        rhs[3] = pulled.y;
+        bb = p.mean.dot(&pulled);
+    }
 
     for (k, (obs, ray)) in observations.iter().zip(rays).enumerate() {
         let uav = obs.uav.index();

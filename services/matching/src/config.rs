@@ -165,6 +165,14 @@ pub struct MatchingConfig {
     /// Followed points must agree on one frame-to-frame homography within this many
     /// pixels.
     pub track_ransac_px: f64,
+    /// Several targets (`chain/others.rs`): another object of the current left image
+    /// and one of the right image are the same vehicle only if the left one, carried
+    /// by the ground homography between the two images, lands within this many pixels
+    /// of the right one ...
+    pub others_gate_px: f64,
+    /// ... and their colours differ by at most this much per channel (0–255; 255
+    /// turns the colour test off).
+    pub others_colour_gate: f64,
 }
 
 impl Default for MatchingConfig {
@@ -209,6 +217,8 @@ impl Default for MatchingConfig {
             track_points_per_image: 150,
             track_min_inliers: 30,
             track_ransac_px: 1.0,
+            others_gate_px: 12.0,
+            others_colour_gate: 60.0,
         }
     }
 }
@@ -261,7 +271,10 @@ impl MatchingConfig {
             && (8..=10_000).contains(&self.track_points_per_image)
             && self.track_min_inliers >= 8
             && self.track_ransac_px > 0.0
-            && self.track_ransac_px.is_finite();
+            && self.track_ransac_px.is_finite()
+            && self.others_gate_px > 0.0
+            && self.others_gate_px.is_finite()
+            && (0.0..=255.0).contains(&self.others_colour_gate);
         if ok {
             Ok(())
         } else {

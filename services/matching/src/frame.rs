@@ -7,7 +7,7 @@ use crate::features::{Features, OrbExtractor};
 use opencv::core as cv;
 use shared_types::conventions::Intrinsics;
 use shared_types::lens::Distortion;
-use shared_types::messages::PoseSample;
+use shared_types::messages::{Candidate, DetectionMsg, PoseSample, MAX_CANDIDATES};
 
 /// One current frame as the chain needs it.
 #[derive(Debug, Clone, Copy)]
@@ -59,7 +59,33 @@ impl<'a> FrameInput<'a> {
             distortion: self.distortion,
             width: self.width,
             height: self.height,
+            others: Others::default(),
         }
+    }
+}
+
+/// The other objects detection found in a frame beside the target (several targets),
+/// in the recorded (distorted) pixels.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct Others {
+    count: usize,
+    items: [Candidate; MAX_CANDIDATES],
+}
+
+impl Others {
+    /// A detection message's candidates.
+    pub fn of(d: &DetectionMsg) -> Self {
+        let items = d.candidates();
+        let mut out = Self {
+            count: items.len(),
+            ..Self::default()
+        };
+        out.items[..items.len()].copy_from_slice(items);
+        out
+    }
+
+    pub fn as_slice(&self) -> &[Candidate] {
+        &self.items[..self.count]
     }
 }
 
@@ -75,6 +101,8 @@ pub struct FrameMeta {
     pub distortion: Distortion,
     pub width: u32,
     pub height: u32,
+    /// The other objects detection found (none from a [`FrameInput`]).
+    pub others: Others,
 }
 
 #[derive(Debug, thiserror::Error)]

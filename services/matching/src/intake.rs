@@ -10,7 +10,7 @@
 //! [`Intake::next_set`] until it returns `None`.
 
 use crate::chain::MatchOutcome;
-use crate::frame::{ChainCounts, FrameInput, FrameMeta};
+use crate::frame::{ChainCounts, FrameInput, FrameMeta, Others};
 use crate::frame_tracking::{FrameTracker, Observed, TrackReport};
 use crate::ring_store::RingStore;
 use crate::{ChainTiming, MatchingConfig, VisionChain};
@@ -21,7 +21,9 @@ use shared_types::clock::{elapsed_us, monotonic_ns};
 use shared_types::conventions::{Intrinsics, Uav};
 use shared_types::deadline::{Deadlines, Verdict};
 use shared_types::lens::Distortion;
-use shared_types::messages::{DetectionMsg, FrameHeader, ObservationSetMsg, MAX_OBSERVATIONS};
+use shared_types::messages::{
+    DetectionMsg, FrameHeader, ObservationSetMsg, OtherTarget, MAX_OBSERVATIONS, MAX_OTHER_TARGETS,
+};
 use shared_types::stats::StageStats;
 use shared_types::trace::Tracer;
 use std::collections::BTreeMap;
@@ -87,12 +89,14 @@ fn frame_meta(header: &FrameHeader) -> FrameMeta {
         distortion: Distortion(header.distortion),
         width: header.width,
         height: header.height,
+        others: Others::default(),
     }
 }
 
 fn meta(header: &FrameHeader, detection: &DetectionMsg) -> FrameMeta {
     FrameMeta {
         detection: (detection.found == 1).then_some(detection.centre),
+        others: Others::of(detection),
         ..frame_meta(header)
     }
 }
@@ -388,6 +392,7 @@ impl Intake {
                     rejected_past: rejections.len() as u32,
                     ..Default::default()
                 };
+                self.put_others([&ml, &mr], &m, &mut msg);
                 let frames = [(hl.seq, hl.t_s), (hr.seq, hr.t_s)]
                     .into_iter()
                     .chain(m.past.iter().map(|p| (p.seq, p.t_s)));
@@ -425,6 +430,47 @@ impl Intake {
         self.stats.record("match", match_us);
         self.stats.record("compute", pair.orb_us / 2 + match_us);
         set
+    }
+
+    /// The other vehicles of the pair into `msg` (counted `others` per pair,
+    /// `others_unpaired`, `others_no_geometry`, `others_dropped` beyond the message's
+    /// room).
+    fn put_others(
+        &mut self,
+        current: [&FrameMeta; 2],
+        matched: &crate::chain::MatchedSet,
+        msg: &mut ObservationSetMsg,
+    ) {
+        let outcome = self.chain.others(current, matched);
+        if outcome.no_geometry {
+            self.stats.count("others_no_geometry", 1);
+        }
+        if outcome.unpaired > 0 {
+            self.stats.count("others_unpaired", outcome.unpaired as u64);
+        }
+        let kept = outcome.targets.len().min(MAX_OTHER_TARGETS);
+        msg.others_dropped = (outcome.targets.len() - kept) as u32;
+        if msg.others_dropped > 0 {
+            self.stats
+                .count("others_dropped", u64::from(msg.others_dropped));
+        }
+        for (slot, t) in msg.others.iter_mut().zip(&outcome.targets) {
+            *slot = OtherTarget {
+                current: t.current,
+                bgr: t.bgr,
+                ..OtherTarget::default()
+            };
+            for (k, p) in t.past.iter().enumerate().take(MAX_OBSERVATIONS - 2) {
+                if let Some(p) = p {
+                    slot.past[k] = *p;
+                    slot.past_valid |= 1 << k;
+                }
+            }
+        }
+        msg.other_count = kept as u32;
+        if kept > 0 {
+            self.stats.count("others", kept as u64);
+        }
     }
 
     /// Saves newly admitted keyframes (called after the sets are published).

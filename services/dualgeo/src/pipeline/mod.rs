@@ -107,13 +107,18 @@ fn check_config(path: &Path) -> Result<()> {
         detection::yolo::YoloDetector::new(yolo).context("[detection.yolo]")?;
     }
     load_section::<shared_types::realtime::RealtimeConfig>(Some(path), "realtime")?.validate()?;
+    load_section::<geolocation::tracks::TrackConfig>(Some(path), "tracks")?
+        .validate()
+        .map_err(anyhow::Error::msg)?;
     let text = std::fs::read_to_string(path)?;
     let table: toml::Table = toml::from_str(&text)?;
+    let known = ["matching", "estimator", "detection", "tracks", "realtime"];
     for key in table.keys() {
-        if !["matching", "estimator", "detection", "realtime"].contains(&key.as_str()) {
+        if !known.contains(&key.as_str()) {
             bail!(
-                "{}: unknown section [{key}] (expected matching, estimator, detection, realtime)",
-                path.display()
+                "{}: unknown section [{key}] (expected {})",
+                path.display(),
+                known.join(", ")
             );
         }
     }

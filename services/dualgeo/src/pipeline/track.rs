@@ -8,7 +8,10 @@
 //! geodetic origin), yaw_bias_left_deg, yaw_bias_right_deg, images_used, iterations,
 //! h_acc_m, v_acc_m (1σ horizontal and vertical accuracy), quality (`converging`: the
 //! yaw biases are not yet known and the accuracy says so; `tracking`; `coasting`: no
-//! ray of the current pair was taken, the estimate is the filter's prediction).
+//! ray of the current pair was taken, the estimate is the filter's prediction),
+//! track_id (0: the target; from 1: the other vehicles' confirmed tracks, one row each
+//! per pair after the target's, with the target's yaw biases, which they share, and
+//! images_used and iterations 0).
 
 use acquisition::recording::Origin;
 use anyhow::{Context, Result};
@@ -19,7 +22,7 @@ use std::time::{Duration, Instant};
 
 pub const FLUSH_EVERY: Duration = Duration::from_millis(500);
 
-const HEADER: [&str; 15] = [
+const HEADER: [&str; 16] = [
     "t_s",
     "pair_seq",
     "x_m",
@@ -35,6 +38,7 @@ const HEADER: [&str; 15] = [
     "h_acc_m",
     "v_acc_m",
     "quality",
+    "track_id",
 ];
 
 pub fn geodetic(origin: &Origin, p: &[f64; 3]) -> (f64, f64, f64) {
@@ -113,9 +117,40 @@ impl TrackWriter {
                 geolocation::Quality::from_index(e.quality)
                     .map_or("unknown", |q| q.name())
                     .to_string(),
+                "0".to_string(),
             ])
             .with_context(|| format!("write {}", self.path.display()))?;
         self.rows += 1;
+        for t in e.tracks() {
+            let geo = self.origin.as_ref().map(|o| geodetic(o, &t.position));
+            let g = |f: fn(&(f64, f64, f64)) -> f64, digits: usize| {
+                geo.as_ref()
+                    .map_or(String::new(), |v| format!("{:.*}", digits, f(v)))
+            };
+            let h = (t.covariance_xy[0] + t.covariance_xy[3]).max(0.0).sqrt();
+            self.w
+                .write_record([
+                    format!("{:.6}", e.t_s),
+                    e.pair_seq.to_string(),
+                    format!("{:.3}", t.position[0]),
+                    format!("{:.3}", t.position[1]),
+                    format!("{:.3}", t.position[2]),
+                    g(|v| v.0, 8),
+                    g(|v| v.1, 8),
+                    g(|v| v.2, 3),
+                    format!("{:.3}", e.yaw_bias_deg[0]),
+                    format!("{:.3}", e.yaw_bias_deg[1]),
+                    "0".to_string(),
+                    "0".to_string(),
+                    format!("{h:.3}"),
+                    format!("{:.3}", t.altitude_std_error_m),
+                    geolocation::Quality::from_index(u64::from(t.quality))
+                        .map_or("unknown", |q| q.name())
+                        .to_string(),
+                    t.id.to_string(),
+                ])
+                .with_context(|| format!("write {}", self.path.display()))?;
+        }
         if self.last_flush.elapsed() >= FLUSH_EVERY {
             self.flush()?;
         }
@@ -130,13 +165,17 @@ impl TrackWriter {
     }
 }
 
-/// The valid estimates of a track file, with what the file keeps of them (time, pair,
+/// The target's valid estimates in a track file (track_id 0; every row of a file
+/// written before the column), with what the file keeps of them (time, pair,
 /// position, biases; the rest default), for the end-of-run outputs.
 pub fn read_back(path: &Path) -> Result<Vec<EstimateMsg>> {
     let mut r = csv::Reader::from_path(path).with_context(|| format!("read {}", path.display()))?;
     let mut out = Vec::new();
     for (i, row) in r.records().enumerate() {
         let row = row.with_context(|| format!("{} row {}", path.display(), i + 2))?;
+        if row.get(15).is_some_and(|id| !id.is_empty() && id != "0") {
+            continue;
+        }
         let f = |k: usize| -> Result<f64> {
             row.get(k)
                 .and_then(|v| v.parse::<f64>().ok())
@@ -183,6 +222,47 @@ mod tests {
         assert_eq!(back[0].position, [1.0, -2.0, 3.25]);
         assert_eq!(back[0].yaw_bias_deg, [20.5, -3.0]);
         assert_eq!(w.rows, 1);
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    /// Another vehicle's track is a row of its own with its id; the end-of-run outputs
+    /// read the target's rows only.
+    #[test]
+    fn other_tracks_get_rows_of_their_own() {
+        let dir = std::env::temp_dir().join(format!("dualgeo-tracks-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("track.csv");
+        let mut w = TrackWriter::create(&path, None).unwrap();
+        let mut e = EstimateMsg {
+            t_s: 2.0,
+            pair_seq: 60,
+            position: [1.0, 2.0, 13.5],
+            yaw_bias_deg: [20.0, -20.0],
+            status: EstimateStatus::Ok as u32,
+            track_count: 1,
+            ..Default::default()
+        };
+        e.tracks[0] = shared_types::messages::TrackEstimate {
+            id: 3,
+            quality: 2,
+            position: [9.0, 8.0, 13.0],
+            covariance_xy: [0.09, 0.0, 0.0, 0.16],
+            altitude_std_error_m: 0.5,
+            velocity_mps: [1.0, 0.0],
+        };
+        w.push(&e).unwrap();
+        w.flush().unwrap();
+        let text = std::fs::read_to_string(&path).unwrap();
+        let rows: Vec<&str> = text.lines().collect();
+        assert!(rows[0].ends_with(",quality,track_id"));
+        assert!(rows[1].ends_with(",converging,0"), "{}", rows[1]);
+        assert_eq!(
+            rows[2],
+            "2.000000,60,9.000,8.000,13.000,,,,20.000,-20.000,0,0,0.500,0.500,coasting,3"
+        );
+        let back = read_back(&path).unwrap();
+        assert_eq!(back.len(), 1);
+        assert_eq!(back[0].position, [1.0, 2.0, 13.5]);
         std::fs::remove_dir_all(&dir).unwrap();
     }
 }

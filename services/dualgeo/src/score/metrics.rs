@@ -21,8 +21,8 @@
 //! - **IDF1** (Ristani et al. 2016): the truth-to-track bijection maximising the pairs
 //!   where both are within the threshold.
 
-use super::assignment;
 use serde::Serialize;
+use shared_types::assignment;
 use std::collections::{BTreeMap, BTreeSet};
 
 /// One object at one pair: a vehicle (truth) or a track's estimate.

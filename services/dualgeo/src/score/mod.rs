@@ -4,7 +4,6 @@
 //! the located share and MAE; the yaw-bias MAE. Any recording in the format can be
 //! scored, made here or elsewhere. Evaluation only: no stage reads truth.
 
-mod assignment;
 pub mod input;
 pub mod metrics;
 

@@ -7,11 +7,13 @@
 mod anchors;
 mod fresh_fit;
 mod landing;
+mod others;
 mod past;
 mod refresh;
 
 use anchors::{Guide, KeyframeId, Prior, PriorKey};
 pub use landing::LandingReport;
+pub use others::{OtherPixels, OthersOutcome};
 use past::{match_past, Job, PastResult};
 use refresh::Refresher;
 pub use refresh::{RefreshJob, RefreshResult};

@@ -1,5 +1,5 @@
-//! Optimal assignment between two sets (truth and estimates, truth and tracks), with
-//! `pathfinding`'s Kuhn–Munkres (O(n³)). Either side may be the larger; the crate
+//! Optimal assignment between two sets (detections across the two views, estimates to
+//! tracks, truth to tracks in the scorer), with `pathfinding`'s Kuhn–Munkres (O(n³)). Either side may be the larger; the crate
 //! wants the rows to be the smaller side and integer weights, so this transposes and
 //! scales metres to micrometres (differences below 1 µm tie).
 
@@ -79,10 +79,13 @@ mod tests {
 
     #[test]
     fn the_least_cost_is_found_whichever_side_is_larger() {
+        // A fixed linear congruential sequence (Knuth's MMIX constants).
         let mut state = 7u64;
         let mut next = || {
-            state = acquisition::sim::texture::hash(state);
-            (state % 10_000) as f64 / 1000.0
+            state = state
+                .wrapping_mul(6_364_136_223_846_793_005)
+                .wrapping_add(1_442_695_040_888_963_407);
+            ((state >> 33) % 10_000) as f64 / 1000.0
         };
         for (rows, columns) in [(1, 1), (2, 3), (3, 3), (4, 2), (5, 5), (3, 6)] {
             let cost: Vec<Vec<f64>> = (0..rows)

@@ -1,0 +1,289 @@
+//! The geolocation service's other vehicles: each [`OtherTarget`] of an observation
+//! set located with the yaw biases of the target's estimate on the same pair
+//! ([`crate::shared_bias`]), then the tracks ([`crate::tracks`]) updated and the
+//! confirmed ones put into the [`EstimateMsg`]. Every field of the set is untrusted, as
+//! in [`crate::set_message`]: a bad pixel drops that vehicle (counted), never a panic,
+//! never a NaN out.
+//!
+//! Counters: `others_located`, `others_rejected.<kind>`, `others_no_biases` (a pair
+//! with other vehicles but no valid target estimate to take the biases from),
+//! `tracks_confirmed`, `tracks_deleted`, `tracks_tentative_dropped`,
+//! `tracks_reacquired`, `tracks_target_fixes`.
+
+use crate::shared_bias::{locate_with_biases, OtherFix, SharedBiases};
+use crate::tracks::{TrackQuality, Tracks};
+use crate::{EstimatorConfig, Observation};
+use nalgebra::{Matrix2, Vector2};
+use shared_types::messages::{
+    EstimateMsg, EstimateStatus, ObservationSetMsg, OtherTarget, TrackEstimate, MAX_TRACKS,
+};
+use shared_types::stats::StageStats;
+
+/// The shared biases of the target's estimate `msg`, when it is valid.
+fn biases_of(msg: &EstimateMsg) -> Option<SharedBiases> {
+    if msg.status != EstimateStatus::Ok as u32 {
+        return None;
+    }
+    let c = &msg.covariance;
+    Some(SharedBiases {
+        mean: msg.yaw_bias_deg.map(f64::to_radians),
+        covariance: Matrix2::new(c[10], c[11], c[14], c[15]),
+    })
+}
+
+/// The observations of vehicle `other` (the set's images with its pixels, where its
+/// transfer reached) and the target's through the same images. `None` when an entry
+/// or pixel is bad.
+fn observations_of(
+    set: &ObservationSetMsg,
+    other: &OtherTarget,
+) -> Option<(Vec<Observation>, Vec<Observation>)> {
+    let entries = set.entries();
+    if entries.len() < 2 {
+        return None;
+    }
+    let mut theirs = Vec::with_capacity(entries.len());
+    let mut target = Vec::with_capacity(entries.len());
+    for (i, e) in entries.iter().enumerate() {
+        let pixel = match i {
+            0 | 1 => Some(other.current[i]),
+            _ => other.past_pixel(i - 2),
+        };
+        let Some(pixel) = pixel else { continue };
+        if !pixel.iter().all(|v| v.is_finite()) {
+            return None;
+        }
+        let o = Observation::from_entry(e, i).ok()?;
+        target.push(o);
+        theirs.push(Observation {
+            pixel: Vector2::new(pixel[0], pixel[1]),
+            ..o
+        });
+    }
+    Some((theirs, target))
+}
+
+/// Vehicle `other` located relative to the target: both through the same images with
+/// the same biases, and the difference added to the target's estimate `msg`. What
+/// the two share (each image's GPS and attitude error, the biases' error, the
+/// altitude's) cancels in the difference; the target's filter has averaged it out of
+/// the target's own estimate over time, one window of a vehicle could not. Its
+/// covariance: the target's (x, y) block plus the vehicle's own with the biases taken
+/// as known (their error is common to both and cancels).
+fn locate_relative(
+    set: &ObservationSetMsg,
+    other: &OtherTarget,
+    msg: &EstimateMsg,
+    biases: &SharedBiases,
+    config: &EstimatorConfig,
+) -> Result<OtherFix, &'static str> {
+    let (theirs, target) = observations_of(set, other).ok_or("bad_input")?;
+    let fix = locate_with_biases(&theirs, biases, config).map_err(|e| e.kind())?;
+    let reference = locate_with_biases(&target, biases, config).map_err(|e| e.kind())?;
+    let c = &msg.covariance;
+    let target_xy = Matrix2::new(c[0], c[1], c[4], c[5]);
+    let d = fix.position - reference.position;
+    let position = nalgebra::Point3::new(
+        msg.position[0] + d.x,
+        msg.position[1] + d.y,
+        msg.position[2] + d.z,
+    );
+    Ok(OtherFix {
+        position,
+        covariance_xy: target_xy + fix.covariance_xy_given_biases,
+        covariance_xy_given_biases: target_xy + fix.covariance_xy_given_biases,
+        altitude_std_error_m: fix.altitude_std_error_m.hypot(msg.altitude_std_error_m),
+        images_used: fix.images_used,
+    })
+}
+
+/// Locates the other vehicles of `set`, updates `tracks` and writes the confirmed
+/// tracks into `msg` (the target's estimate of the same pair).
+pub fn add_tracks(
+    set: &ObservationSetMsg,
+    msg: &mut EstimateMsg,
+    tracks: &mut Tracks,
+    config: &EstimatorConfig,
+    stats: &mut StageStats,
+) {
+    let biases = biases_of(msg);
+    let others = set.others();
+    let mut fixes: Vec<OtherFix> = Vec::with_capacity(others.len());
+    match biases {
+        None if !others.is_empty() => stats.count("others_no_biases", 1),
+        None => {}
+        Some(b) => {
+            for other in others {
+                match locate_relative(set, other, msg, &b, config) {
+                    Ok(fix) => {
+                        stats.count("others_located", 1);
+                        tracing::debug!(
+                            pair = set.pair_seq,
+                            x = fix.position.x,
+                            y = fix.position.y,
+                            z = fix.position.z,
+                            h_acc = fix.covariance_xy.trace().sqrt(),
+                            "other vehicle located"
+                        );
+                        fixes.push(fix);
+                    }
+                    Err(kind) => stats.count(&format!("others_rejected.{kind}"), 1),
+                }
+            }
+        }
+    }
+    let target =
+        (msg.status == EstimateStatus::Ok as u32).then_some([msg.position[0], msg.position[1]]);
+    let reports = tracks.update(set.t_s, &fixes, target);
+    let c = tracks.take_counts();
+    for (name, n) in [
+        ("tracks_confirmed", c.confirmed),
+        ("tracks_deleted", c.deleted),
+        ("tracks_tentative_dropped", c.tentative_dropped),
+        ("tracks_reacquired", c.reacquired),
+        ("tracks_target_fixes", c.target_fixes),
+    ] {
+        if n > 0 {
+            stats.count(name, n);
+        }
+    }
+    msg.track_count = 0;
+    for (slot, r) in msg.tracks.iter_mut().zip(reports.iter().take(MAX_TRACKS)) {
+        let cov = r.covariance_xy;
+        *slot = TrackEstimate {
+            id: r.id,
+            quality: match r.quality {
+                TrackQuality::Tracking => 1,
+                TrackQuality::Coasting => 2,
+            },
+            position: r.position,
+            covariance_xy: [cov[(0, 0)], cov[(0, 1)], cov[(1, 0)], cov[(1, 1)]],
+            altitude_std_error_m: r.altitude_std_m,
+            velocity_mps: r.velocity_mps,
+        };
+        let finite = slot
+            .position
+            .iter()
+            .chain(&slot.covariance_xy)
+            .chain(&slot.velocity_mps)
+            .all(|v| v.is_finite())
+            && slot.altitude_std_error_m.is_finite();
+        if finite {
+            msg.track_count += 1;
+        } else {
+            stats.count("tracks_non_finite", 1);
+            break;
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::synthetic::{NavNoise, SyntheticScenario};
+    use crate::tracks::TrackConfig;
+    use rand::SeedableRng;
+
+    /// A set whose target and one other vehicle are the same synthetic trial moved by
+    /// `offset` metres east: the other vehicle's pixels are its projections.
+    fn set_and_truth(
+        t_s: f64,
+    ) -> (
+        ObservationSetMsg,
+        nalgebra::Point3<f64>,
+        nalgebra::Point3<f64>,
+    ) {
+        let s = SyntheticScenario {
+            noise: NavNoise::NONE,
+            ..SyntheticScenario::default()
+        };
+        let trial = s
+            .trial(t_s, 4, &mut rand::rngs::StdRng::seed_from_u64(3))
+            .unwrap();
+        let mut set = ObservationSetMsg {
+            t_s,
+            ..Default::default()
+        };
+        let offset = nalgebra::Vector3::new(6.0, 0.0, 0.0);
+        let other_point = trial.target + offset;
+        let mut other = OtherTarget::default();
+        for (i, (slot, o)) in set.entries.iter_mut().zip(&trial.observations).enumerate() {
+            *slot = o.to_entry();
+            slot.frame_seq = i as u64;
+            slot.t_s = t_s;
+            set.count += 1;
+            // The true camera (the measured attitude minus its bias) sees the point.
+            let mut attitude = o.attitude;
+            attitude.yaw -= trial.yaw_bias[o.uav.index()];
+            let cam = shared_types::conventions::camera_to_world(attitude).transpose()
+                * (other_point - o.position);
+            let px = o.intrinsics.project(cam).unwrap();
+            if i < 2 {
+                other.current[i] = [px.x, px.y];
+            } else {
+                other.past[i - 2] = [px.x, px.y];
+                other.past_valid |= 1 << (i - 2);
+            }
+        }
+        set.others[0] = other;
+        set.other_count = 1;
+        (set, other_point, trial.target)
+    }
+
+    #[test]
+    fn another_vehicle_is_located_with_the_targets_biases_and_tracked() {
+        let (set, truth, target) = set_and_truth(6.0);
+        let trial_bias = {
+            let s = SyntheticScenario::default();
+            s.bias.at(6.0).map(f64::to_degrees)
+        };
+        let mut tracks = Tracks::new(TrackConfig::default()).unwrap();
+        let mut stats = StageStats::new("t");
+        let config = EstimatorConfig::default();
+        let mut last = EstimateMsg::default();
+        for k in 0..4 {
+            // The target's estimate 0.5 m east of the target: the vehicle, located
+            // relative to it, is 0.5 m east of where it is too.
+            let mut msg = EstimateMsg {
+                t_s: 6.0 + k as f64 / 30.0,
+                yaw_bias_deg: trial_bias,
+                position: [target.x + 0.5, target.y, target.z],
+                ..Default::default()
+            };
+            msg.covariance[10] = 0.01_f64.to_radians().powi(2);
+            msg.covariance[15] = 0.01_f64.to_radians().powi(2);
+            let mut set = set;
+            set.t_s = msg.t_s;
+            add_tracks(&set, &mut msg, &mut tracks, &config, &mut stats);
+            last = msg;
+        }
+        assert_eq!(stats.counter("others_located"), 4);
+        assert_eq!(last.tracks().len(), 1);
+        let t = last.tracks()[0];
+        assert_eq!((t.id, t.quality), (1, 1));
+        assert!(
+            (t.position[0] - 0.5 - truth.x).abs() < 0.3,
+            "{t:?} vs {truth}"
+        );
+        assert!((t.position[1] - truth.y).abs() < 0.3, "{t:?} vs {truth}");
+    }
+
+    #[test]
+    fn without_a_target_estimate_or_with_a_bad_pixel_nothing_is_located() {
+        let (mut set, _, _) = set_and_truth(6.0);
+        let mut tracks = Tracks::new(TrackConfig::default()).unwrap();
+        let mut stats = StageStats::new("t");
+        let config = EstimatorConfig::default();
+        let mut msg = EstimateMsg {
+            status: EstimateStatus::Rejected as u32,
+            ..Default::default()
+        };
+        add_tracks(&set, &mut msg, &mut tracks, &config, &mut stats);
+        assert_eq!(stats.counter("others_no_biases"), 1);
+        let mut msg = EstimateMsg::default();
+        set.others[0].current[1][0] = f64::NAN;
+        add_tracks(&set, &mut msg, &mut tracks, &config, &mut stats);
+        assert_eq!(stats.counter("others_rejected.bad_input"), 1);
+        assert_eq!(msg.track_count, 0);
+    }
+}

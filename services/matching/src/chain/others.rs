@@ -1,0 +1,239 @@
+//! Several targets: the other vehicles both current images show, paired across the
+//! two views and carried into the pair's past images through the fundamental
+//! matrices the target's matching fitted. They get no fit of their own: an extra
+//! vehicle costs two line intersections per past image (eq. 27–28), not a matching.
+//!
+//! **Pairing across the views (a choice).** A ground-plane homography from the current
+//! left image to the current right one, composed through a keyframe both current
+//! images were fitted to on this pair (H_LR = H_R⁻¹ · H_L), then shifted by the
+//! target's own residual (a roof as high above the ground as theirs: the shift takes
+//! out the roof-height parallax). Left and right objects are then paired by the
+//! optimal assignment on the distance from the mapped left pixel to the right one,
+//! within `others_gate_px`, their colours within `others_colour_gate` per channel.
+//! The measured poses are not used: a 20° yaw bias moves a ground point by tens of
+//! metres, while the homography is fitted on the images themselves.
+
+use super::{MatchedSet, VisionChain};
+use crate::epipolar::{transfer_point, ImageBounds};
+use crate::frame::FrameMeta;
+use nalgebra::{Matrix3, Vector3};
+use shared_types::assignment;
+use shared_types::conventions::Uav;
+
+/// Another vehicle of the pair, in ideal pinhole pixels.
+#[derive(Debug, Clone, PartialEq)]
+pub struct OtherPixels {
+    /// In the current left and right images.
+    pub current: [[f64; 2]; 2],
+    /// In each past image of the set (`MatchedSet::past` order), when its transfer
+    /// succeeded.
+    pub past: Vec<Option<[f64; 2]>>,
+    /// Its colour in the current left and right images (BGR).
+    pub bgr: [[u8; 3]; 2],
+}
+
+/// What pairing and transfer made of the other objects of one pair.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct OthersOutcome {
+    pub targets: Vec<OtherPixels>,
+    /// Objects seen by one current image and paired with none of the other's.
+    pub unpaired: usize,
+    /// There were objects on both sides but no homography between the current images
+    /// (no keyframe fitted by both on this pair, or the target disagreed with it).
+    pub no_geometry: bool,
+}
+
+/// A target residual beyond this (px) means the composed homography does not hold
+/// for this pair: no pairing rather than a wrong one.
+const MAX_TARGET_RESIDUAL_PX: f64 = 40.0;
+
+fn apply(h: &Matrix3<f64>, p: [f64; 2]) -> Option<[f64; 2]> {
+    let q = h * Vector3::new(p[0], p[1], 1.0);
+    (q.z.abs() > 1e-12).then(|| [q.x / q.z, q.y / q.z])
+}
+
+/// An object in one current image: ideal pixel and colour.
+type Seen = ([f64; 2], [u8; 3]);
+
+/// The left and right objects that are the same vehicle, as (left, right) indices:
+/// the optimal assignment on the distance from the left pixel carried by
+/// `left_to_right` to the right one, within `gate` px, colours within `colour_gate`
+/// per channel.
+fn pair_across(
+    sides: &[Vec<Seen>; 2],
+    left_to_right: &Matrix3<f64>,
+    gate: f64,
+    colour_gate: f64,
+) -> Vec<(usize, usize)> {
+    let mapped: Vec<Option<[f64; 2]>> = sides[0]
+        .iter()
+        .map(|(p, _)| apply(left_to_right, *p))
+        .collect();
+    let distance = |i: usize, j: usize| -> Option<f64> {
+        let m = mapped[i]?;
+        let (pr, bgr_r) = sides[1][j];
+        let bgr_l = sides[0][i].1;
+        let colour_ok =
+            (0..3).all(|c| (f64::from(bgr_l[c]) - f64::from(bgr_r[c])).abs() <= colour_gate);
+        let d = (m[0] - pr[0]).hypot(m[1] - pr[1]);
+        (colour_ok && d <= gate).then_some(d)
+    };
+    // Pairs outside the gates cost more than any set of pairs inside them: the
+    // assignment first pairs as many as it can, then the closest.
+    let forbidden = gate * (sides[0].len() + 1) as f64 + 1.0;
+    let cost: Vec<Vec<f64>> = (0..sides[0].len())
+        .map(|i| {
+            (0..sides[1].len())
+                .map(|j| distance(i, j).unwrap_or(forbidden))
+                .collect()
+        })
+        .collect();
+    assignment::min_cost(&cost)
+        .into_iter()
+        .enumerate()
+        .filter_map(|(i, j)| j.filter(|&j| distance(i, j).is_some()).map(|j| (i, j)))
+        .collect()
+}
+
+impl VisionChain {
+    /// The other objects of `current` (as detection found them) paired across the
+    /// views and carried into the past images of `matched` (the target's set on this
+    /// pair, just matched by [`VisionChain::match_current`]).
+    pub fn others(&self, current: [&FrameMeta; 2], matched: &MatchedSet) -> OthersOutcome {
+        let mut out = OthersOutcome::default();
+        let sides: [Vec<Seen>; 2] = current.map(|f| {
+            f.others
+                .as_slice()
+                .iter()
+                .filter_map(|c| {
+                    let [u, v] = c.centre;
+                    f.distortion
+                        .undistort_pixel(&f.intrinsics, u, v)
+                        .map(|p| (p, c.bgr))
+                })
+                .collect()
+        });
+        if sides[0].is_empty() || sides[1].is_empty() {
+            out.unpaired = sides[0].len() + sides[1].len();
+            return out;
+        }
+        let Some(left_to_right) = self.left_to_right(current, matched) else {
+            out.no_geometry = true;
+            out.unpaired = sides[0].len() + sides[1].len();
+            return out;
+        };
+        let pairs = pair_across(
+            &sides,
+            &left_to_right,
+            self.config.others_gate_px,
+            self.config.others_colour_gate,
+        );
+        out.unpaired = sides[0].len() + sides[1].len() - 2 * pairs.len();
+        for (i, j) in pairs {
+            let current_px = [sides[0][i].0, sides[1][j].0];
+            let past = matched
+                .past
+                .iter()
+                .map(|m| {
+                    let kf = self.rings[m.uav.index()].iter().find(|k| k.seq == m.seq)?;
+                    let bounds = ImageBounds {
+                        intrinsics: &kf.intrinsics,
+                        distortion: &kf.distortion,
+                        width: kf.width,
+                        height: kf.height,
+                    };
+                    transfer_point(
+                        &m.fundamental[0],
+                        current_px[0],
+                        &m.fundamental[1],
+                        current_px[1],
+                        &bounds,
+                        &self.config,
+                    )
+                    .ok()
+                })
+                .collect();
+            out.targets.push(OtherPixels {
+                current: current_px,
+                past,
+                bgr: [sides[0][i].1, sides[1][j].1],
+            });
+        }
+        out
+    }
+
+    /// The ground homography from the current left image to the current right one,
+    /// through the keyframe both were fitted to on this pair with the most inliers,
+    /// shifted by the target's residual; `None` without one or when the target lies
+    /// more than [`MAX_TARGET_RESIDUAL_PX`] off it.
+    fn left_to_right(
+        &self,
+        current: [&FrameMeta; 2],
+        matched: &MatchedSet,
+    ) -> Option<Matrix3<f64>> {
+        let fresh = |side: usize, uav: Uav, seq: u64| {
+            self.priors
+                .get(&(side, uav.index(), seq))
+                .filter(|p| p.t_s == current[side].t_s)
+                .map(|p| p.homography)
+        };
+        let best = matched
+            .past
+            .iter()
+            .filter_map(|m| {
+                let hl = fresh(0, m.uav, m.seq)?;
+                let hr = fresh(1, m.uav, m.seq)?;
+                Some((m.inliers[0].min(m.inliers[1]), hl, hr))
+            })
+            .max_by_key(|(inliers, _, _)| *inliers)?;
+        let h = best.2.try_inverse()? * best.1;
+        let target = [0, 1].map(|side| {
+            let p = matched.current[side].pixel;
+            [p.x, p.y]
+        });
+        let mapped = apply(&h, target[0])?;
+        let shift = [target[1][0] - mapped[0], target[1][1] - mapped[1]];
+        if shift[0].hypot(shift[1]) > MAX_TARGET_RESIDUAL_PX {
+            return None;
+        }
+        let translate = Matrix3::new(1.0, 0.0, shift[0], 0.0, 1.0, shift[1], 0.0, 0.0, 1.0);
+        Some(translate * h)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const RED: [u8; 3] = [36, 28, 214];
+    const BLUE: [u8; 3] = [200, 120, 40];
+
+    /// The right image is the left shifted 100 px left: each vehicle pairs with its
+    /// own, a vehicle whose colour differs is not paired, one beyond the gate neither.
+    #[test]
+    fn vehicles_pair_by_mapped_position_and_colour() {
+        let h = Matrix3::new(1.0, 0.0, -100.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0);
+        let left = vec![
+            ([300.0, 200.0], RED),
+            ([320.0, 200.0], RED),
+            ([400.0, 300.0], BLUE),
+            ([500.0, 100.0], RED),
+        ];
+        let right = vec![
+            ([221.0, 201.0], RED), // the second left one, 1.4 px off
+            ([199.0, 200.0], RED), // the first, 1 px off
+            ([300.0, 300.0], RED), // where the blue one maps, but red
+            ([430.0, 100.0], RED), // 30 px from where the last maps
+        ];
+        let mut pairs = pair_across(&[left, right], &h, 12.0, 60.0);
+        pairs.sort_unstable();
+        assert_eq!(pairs, vec![(0, 1), (1, 0)]);
+    }
+
+    #[test]
+    fn a_homography_that_sends_points_to_infinity_pairs_nothing() {
+        let h = Matrix3::new(1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 1.0, 0.0, -300.0);
+        let sides = [vec![([300.0, 200.0], RED)], vec![([300.0, 200.0], RED)]];
+        assert!(pair_across(&sides, &h, 12.0, 60.0).is_empty());
+    }
+}
