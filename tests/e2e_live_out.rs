@@ -4,39 +4,32 @@
 //! live-simulator run; each decoded position must match track.csv row for row. The
 //! `--mcap` recording is read back by Foxglove's `mcap` package (tests/clients/read_mcap.py).
 
+#[path = "support/py_env.rs"]
+mod py_env;
 #[path = "support/scratch.rs"]
 mod scratch;
 
+use py_env::{python, root};
 use scratch::Scratch;
 use serde_json::Value;
 use std::io::{BufRead, BufReader, Read};
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::{Command, Stdio};
 
-fn root() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")
-}
-
-/// The venv's python with pymavlink and mcap, or why there is none.
-fn python() -> Result<PathBuf, String> {
-    let o = Command::new("bash")
-        .arg(root().join("scripts/py_test_env.sh"))
-        .output()
-        .map_err(|e| e.to_string())?;
-    if !o.status.success() {
-        return Err(String::from_utf8_lossy(&o.stderr).into_owned());
-    }
-    Ok(PathBuf::from(String::from_utf8_lossy(&o.stdout).trim()))
-}
-
-/// (lat, lon, hae) of each row of track.csv.
+/// (lat, lon, hae) of each of the target's rows of track.csv (track_id 0).
 fn track(path: &Path) -> Vec<[f64; 3]> {
     let text = std::fs::read_to_string(path).expect("track.csv");
     let mut lines = text.lines();
     let header: Vec<&str> = lines.next().expect("header").split(',').collect();
     let col = |name: &str| header.iter().position(|h| *h == name).expect(name);
-    let (lat, lon, alt) = (col("lat_deg"), col("lon_deg"), col("alt_m"));
+    let (lat, lon, alt, id) = (
+        col("lat_deg"),
+        col("lon_deg"),
+        col("alt_m"),
+        col("track_id"),
+    );
     lines
+        .filter(|l| l.split(',').nth(id) == Some("0"))
         .map(|l| {
             let f: Vec<&str> = l.split(',').collect();
             [lat, lon, alt].map(|i| f[i].parse::<f64>().expect("a geodetic column"))
@@ -250,6 +243,7 @@ fn the_mcap_recording_is_read_back_by_the_mcap_reader() {
         ("/target/pose", "foxglove.PoseInFrame"),
         ("/latency", "dualgeo.StageLatency"),
         ("/target/quality", "dualgeo.TargetQuality"),
+        ("/targets", "dualgeo.Targets"),
     ];
     let channels = report["channels"].as_object().expect("channels");
     assert_eq!(channels.len(), expected.len(), "{channels:?}");
@@ -306,6 +300,12 @@ fn the_mcap_recording_is_read_back_by_the_mcap_reader() {
     assert!(n("/latency") >= n("/target/fix"));
     // Every estimate says how far it can be trusted (issue #23).
     assert_eq!(n("/target/quality"), n("/target/pose"));
+    // One vehicle in this scene: /targets lists the target alone, once per fix.
+    assert_eq!(n("/targets"), n("/target/fix"));
+    assert_eq!(
+        report["target_ids"],
+        serde_json::json!({"0": n("/target/fix")})
+    );
     let qualities = report["qualities"].as_object().expect("qualities");
     assert!(
         qualities

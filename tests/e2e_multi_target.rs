@@ -2,12 +2,17 @@
 //! recording (the red target, a second red car overtaking it, three other cars):
 //! detection publishes the second red car, matching pairs it across the views and
 //! carries it into the past images, geolocation tracks it with the target's yaw
-//! biases, and `dualgeo score` finds its track near it. With the other vehicles
-//! switched off the target's rows are the same to the last digit.
+//! biases, and `dualgeo score` finds its track near it. Its track is a feature of
+//! track.geojson and is listed on the MCAP recording's `/targets` (read by Foxglove's
+//! `mcap` package). With the other vehicles switched off the target's rows are the
+//! same to the last digit.
 
+#[path = "support/py_env.rs"]
+mod py_env;
 #[path = "support/scratch.rs"]
 mod scratch;
 
+use py_env::{python, root};
 use scratch::{json, Scratch};
 use std::process::{Command, Output};
 
@@ -48,7 +53,10 @@ fn the_second_red_car_gets_a_track_of_its_own_and_the_target_is_untouched() {
     assert!(o.status.success(), "{}", text(&o.stderr));
 
     let out = dir.s("run");
-    let o = dualgeo(&["run", "--source", &rec, "--rate", "max", "--out", &out]);
+    let mcap = dir.s("run.mcap");
+    let o = dualgeo(&[
+        "run", "--source", &rec, "--rate", "max", "--out", &out, "--mcap", &mcap,
+    ]);
     assert!(o.status.success(), "{}", text(&o.stderr));
     let score = dir.s("score.json");
     let o = dualgeo(&[
@@ -101,6 +109,42 @@ fn the_second_red_car_gets_a_track_of_its_own_and_the_target_is_untouched() {
         counters["others_located"].as_u64().unwrap() > 100,
         "{counters}"
     );
+
+    // Every track is a GeoJSON feature with its id.
+    let geo = json(&std::path::Path::new(&out).join("track.geojson"));
+    let ids: Vec<u64> = geo["features"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|f| f["properties"]["track_id"].as_u64().unwrap())
+        .collect();
+    assert_eq!(ids[0], 0, "{ids:?}");
+    assert!(ids.len() >= 2, "{ids:?}");
+    // The MCAP file lists the same tracks on /targets (Foxglove's reader; skipped
+    // without PyPI); at most as often as track.csv has rows of them (at `--rate max`
+    // the recorder may miss estimates, counted `mcap.*_lost`).
+    let track_csv = std::fs::read_to_string(std::path::Path::new(&out).join("track.csv")).unwrap();
+    match python() {
+        Err(e) => eprintln!("SKIPPED the MCAP check: the mcap package could not be installed: {e}"),
+        Ok(python) => {
+            let read = Command::new(python)
+                .arg(root().join("tests/clients/read_mcap.py"))
+                .arg(&mcap)
+                .output()
+                .expect("run the reader");
+            assert!(read.status.success(), "{}", text(&read.stderr));
+            let report: serde_json::Value = serde_json::from_slice(&read.stdout).unwrap();
+            let listed_ids = &report["target_ids"];
+            for id in &ids[1..] {
+                let listed = listed_ids[id.to_string()].as_u64().unwrap_or(0);
+                let in_csv = rows(&track_csv, |t| t == id.to_string()).len() as u64;
+                assert!(
+                    listed > 0 && listed <= in_csv,
+                    "track {id}: {listed} on /targets, {in_csv} rows: {listed_ids}"
+                );
+            }
+        }
+    }
 
     // Other vehicles off: the target's rows are unchanged, and there are no others.
     let config = dir.join("single.toml");

@@ -7,6 +7,7 @@ prints one JSON document of what it found, for tests/e2e_live_out.rs:
  "bad_images": n,      # CompressedImage data that is not base64 of a JPEG
  "fixes": [[lat, lon, alt], ...],   # /target/fix in file order
  "qualities": {state: n},           # /target/quality by quality state
+ "target_ids": {id: n},             # /targets: how often each track id is listed
  "latency_sum_error_ms": x}   # max |sum of stage latencies - end_to_end| where all known
 
 Usage: read_mcap.py FILE
@@ -21,7 +22,7 @@ from mcap.reader import make_reader
 
 def main(path):
     out = {"channels": {}, "bad_json": 0, "bad_images": 0, "fixes": [], "qualities": {},
-           "latency_sum_error_ms": 0.0}
+           "target_ids": {}, "latency_sum_error_ms": 0.0}
     with open(path, "rb") as f:
         reader = make_reader(f)
         summary = reader.get_summary()
@@ -52,6 +53,10 @@ def main(path):
                 out["bad_images"] += 0 if ok else 1
             elif channel.topic == "/target/fix":
                 out["fixes"].append([data["latitude"], data["longitude"], data["altitude"]])
+            elif channel.topic == "/targets":
+                for t in data["targets"]:
+                    key = str(t["track_id"])
+                    out["target_ids"][key] = out["target_ids"].get(key, 0) + 1
             elif channel.topic == "/target/quality":
                 q = data["quality"]
                 out["qualities"][q] = out["qualities"].get(q, 0) + 1

@@ -17,6 +17,7 @@
 mod mc_report;
 mod mc_stats;
 pub mod monte_carlo;
+mod multi_target;
 mod noise;
 mod plots;
 mod report;
@@ -89,6 +90,13 @@ pub struct EvaluateArgs {
     /// Run every Monte Carlo run again instead of reusing the kept ones.
     #[arg(long)]
     pub fresh: bool,
+    /// Only several targets over seeds (issue #26): `multi_town` (or `--scenes`) over
+    /// `--scene-seeds` seeds (default 8; 2 with --quick) through `dualgeo run` and
+    /// `dualgeo score`; `--mc-duration-s` shortens the runs. Writes
+    /// OUT/multi-target-seeds.md and OUT/multi-target-seeds.json; runs are kept in
+    /// OUT/multi-target-seeds/runs/ and reused.
+    #[arg(long, conflicts_with_all = ["suite_only", "no_suite", "monte_carlo"])]
+    pub multi_target: bool,
 }
 
 fn parse_crf(text: &str) -> Result<Option<u8>, String> {
@@ -326,6 +334,25 @@ fn run_monte_carlo(args: &EvaluateArgs) -> Result<()> {
 }
 
 pub fn run(args: &EvaluateArgs) -> Result<()> {
+    if args.multi_target {
+        let plan = multi_target::Plan {
+            scenes: if args.scenes.is_empty() {
+                vec!["multi_town".to_string()]
+            } else {
+                args.scenes.clone()
+            },
+            seeds: args.scene_seeds.unwrap_or(if args.quick { 2 } else { 8 }),
+            duration_s: args.mc_duration_s,
+            warm_up_s: 2.0,
+            out: args.out.clone(),
+            reuse: !args.fresh,
+        };
+        let command = std::iter::once("dualgeo".to_string())
+            .chain(std::env::args().skip(1))
+            .collect::<Vec<_>>()
+            .join(" ");
+        return multi_target::evaluate(&plan, &command);
+    }
     if args.monte_carlo {
         return run_monte_carlo(args);
     }

@@ -1,8 +1,9 @@
 //! What `dualgeo run` leaves in `--out`:
 //!
 //! - `track.csv`: one row per estimate, written as the run goes (`track.rs`).
-//! - `track.geojson`: the track as a WGS84 LineString ([lon, lat, alt]) when the source
-//!   has an origin, made from track.csv at the end.
+//! - `track.geojson`: the target's track and every other vehicle's as WGS84 LineStrings
+//!   ([lon, lat, alt]; one feature each, property `track_id`) when the source has an
+//!   origin, made from track.csv at the end.
 //! - `path.png`: the estimated path against truth, when truth exists.
 //! - `latency/<row>.hgrm` and `latency.png`: the latency percentile distributions.
 //! - `report.json`: exactly `frames_in`, `pairs_in`, `estimates_out`, `frames_dropped`,
@@ -22,7 +23,7 @@ use super::accuracy::{accuracy, pair_with_truth, Accuracy};
 use super::collect::Collected;
 use super::latency::{self, Gathered, LatencyReport};
 use super::plots;
-use super::track::{geodetic, read_back};
+use super::track::{geodetic, read_back, read_other_tracks};
 use super::RunArgs;
 use acquisition::flight::FlightMeta;
 use acquisition::recording::Origin;
@@ -152,25 +153,51 @@ fn frames_dropped(g: &Gathered) -> u64 {
     super::latency::frames_dropped_of(|stage, name| g.counter(stage, name))
 }
 
-fn write_geojson(path: &Path, estimates: &[EstimateMsg], origin: &Origin) -> Result<()> {
+/// The target's track and every other vehicle's as WGS84 LineStrings, one feature
+/// each (`track_id` 0 the target).
+fn write_geojson(
+    path: &Path,
+    estimates: &[EstimateMsg],
+    others: &std::collections::BTreeMap<u32, Vec<[f64; 3]>>,
+    origin: &Origin,
+) -> Result<()> {
     use geojson::{Feature, FeatureCollection, Geometry, Value};
-    let line: Vec<Vec<f64>> = estimates
-        .iter()
-        .map(|e| {
-            let (lat, lon, alt) = geodetic(origin, &e.position);
-            vec![lon, lat, alt]
-        })
-        .collect();
-    let mut props = geojson::JsonObject::new();
-    props.insert("name".into(), "dualgeo target track".into());
-    props.insert("estimates".into(), estimates.len().into());
-    let feature = Feature {
-        geometry: Some(Geometry::new(Value::LineString(line))),
-        properties: Some(props),
-        ..Default::default()
+    let feature = |id: u32, name: String, points: &mut dyn Iterator<Item = [f64; 3]>| {
+        let line: Vec<Vec<f64>> = points
+            .map(|p| {
+                let (lat, lon, alt) = geodetic(origin, &p);
+                vec![lon, lat, alt]
+            })
+            .collect();
+        let mut props = geojson::JsonObject::new();
+        props.insert("name".into(), name.into());
+        props.insert("track_id".into(), id.into());
+        props.insert("estimates".into(), line.len().into());
+        // A LineString needs two positions: a one-estimate track is a Point.
+        let geometry = match line.as_slice() {
+            [one] => Value::Point(one.clone()),
+            _ => Value::LineString(line),
+        };
+        Feature {
+            geometry: Some(Geometry::new(geometry)),
+            properties: Some(props),
+            ..Default::default()
+        }
     };
+    let mut features = vec![feature(
+        0,
+        "dualgeo target track".into(),
+        &mut estimates.iter().map(|e| e.position),
+    )];
+    for (id, points) in others {
+        features.push(feature(
+            *id,
+            format!("dualgeo vehicle {id}"),
+            &mut points.iter().copied(),
+        ));
+    }
     let collection = FeatureCollection {
-        features: vec![feature],
+        features,
         bbox: None,
         foreign_members: None,
     };
@@ -193,8 +220,9 @@ pub fn write_all(
     let gathered = Gathered::load(stats_dir, &supervisor)?;
     let (truth_dir, frame_rate_hz, origin) = source_facts(args, stream_dir)?;
     let ok = read_back(&out.join("track.csv"))?;
+    let others = read_other_tracks(&out.join("track.csv"))?;
     match &origin {
-        Some(o) => write_geojson(&out.join("track.geojson"), &ok, o)?,
+        Some(o) => write_geojson(&out.join("track.geojson"), &ok, &others, o)?,
         None => eprintln!("the source has no geodetic origin: track.geojson not written"),
     }
     let paired = pair_with_truth(&truth_dir, &ok, frame_rate_hz)?;

@@ -10,8 +10,9 @@
 //! yaw biases are not yet known and the accuracy says so; `tracking`; `coasting`: no
 //! ray of the current pair was taken, the estimate is the filter's prediction),
 //! track_id (0: the target; from 1: the other vehicles' confirmed tracks, one row each
-//! per pair after the target's, with the target's yaw biases, which they share, and
-//! images_used and iterations 0).
+//! per pair after the target's, with the target's yaw biases, which they share (empty
+//! when the target's estimate of that pair was rejected), and images_used and
+//! iterations 0).
 
 use acquisition::recording::Origin;
 use anyhow::{Context, Result};
@@ -87,11 +88,20 @@ impl TrackWriter {
         })
     }
 
-    /// Writes `e` if it is a valid estimate.
+    /// Writes the target's row if `e` is a valid estimate, and a row per other track
+    /// it carries (those come with a rejected target estimate too).
     pub fn push(&mut self, e: &EstimateMsg) -> Result<()> {
-        if e.status != EstimateStatus::Ok as u32 {
-            return Ok(());
+        if e.status == EstimateStatus::Ok as u32 {
+            self.push_target(e)?;
         }
+        self.push_tracks(e)?;
+        if self.last_flush.elapsed() >= FLUSH_EVERY {
+            self.flush()?;
+        }
+        Ok(())
+    }
+
+    fn push_target(&mut self, e: &EstimateMsg) -> Result<()> {
         let geo = self.origin.as_ref().map(|o| geodetic(o, &e.position));
         let g = |f: fn(&(f64, f64, f64)) -> f64, digits: usize| {
             geo.as_ref()
@@ -121,6 +131,19 @@ impl TrackWriter {
             ])
             .with_context(|| format!("write {}", self.path.display()))?;
         self.rows += 1;
+        Ok(())
+    }
+
+    fn push_tracks(&mut self, e: &EstimateMsg) -> Result<()> {
+        // The shared biases are the target's estimate's: unknown on a pair whose
+        // target estimate was rejected (its tracks then coast).
+        let bias = |k: usize| {
+            if e.status == EstimateStatus::Ok as u32 {
+                format!("{:.3}", e.yaw_bias_deg[k])
+            } else {
+                String::new()
+            }
+        };
         for t in e.tracks() {
             let geo = self.origin.as_ref().map(|o| geodetic(o, &t.position));
             let g = |f: fn(&(f64, f64, f64)) -> f64, digits: usize| {
@@ -138,8 +161,8 @@ impl TrackWriter {
                     g(|v| v.0, 8),
                     g(|v| v.1, 8),
                     g(|v| v.2, 3),
-                    format!("{:.3}", e.yaw_bias_deg[0]),
-                    format!("{:.3}", e.yaw_bias_deg[1]),
+                    bias(0),
+                    bias(1),
                     "0".to_string(),
                     "0".to_string(),
                     format!("{h:.3}"),
@@ -150,9 +173,6 @@ impl TrackWriter {
                     t.id.to_string(),
                 ])
                 .with_context(|| format!("write {}", self.path.display()))?;
-        }
-        if self.last_flush.elapsed() >= FLUSH_EVERY {
-            self.flush()?;
         }
         Ok(())
     }
@@ -189,6 +209,29 @@ pub fn read_back(path: &Path) -> Result<Vec<EstimateMsg>> {
             status: EstimateStatus::Ok as u32,
             ..Default::default()
         });
+    }
+    Ok(out)
+}
+
+/// The other vehicles' tracks in a track file (track_id ≥ 1): per id, its positions
+/// (x, y, z, ENU metres) in file order.
+pub fn read_other_tracks(path: &Path) -> Result<std::collections::BTreeMap<u32, Vec<[f64; 3]>>> {
+    let mut r = csv::Reader::from_path(path).with_context(|| format!("read {}", path.display()))?;
+    let mut out: std::collections::BTreeMap<u32, Vec<[f64; 3]>> = Default::default();
+    for (i, row) in r.records().enumerate() {
+        let row = row.with_context(|| format!("{} row {}", path.display(), i + 2))?;
+        let Some(id) = row.get(15).and_then(|v| v.parse::<u32>().ok()) else {
+            continue;
+        };
+        if id == 0 {
+            continue;
+        }
+        let f = |k: usize| -> Result<f64> {
+            row.get(k)
+                .and_then(|v| v.parse::<f64>().ok())
+                .with_context(|| format!("{} row {} column {}", path.display(), i + 2, k + 1))
+        };
+        out.entry(id).or_default().push([f(2)?, f(3)?, f(4)?]);
     }
     Ok(out)
 }
@@ -263,6 +306,9 @@ mod tests {
         let back = read_back(&path).unwrap();
         assert_eq!(back.len(), 1);
         assert_eq!(back[0].position, [1.0, 2.0, 13.5]);
+        let others = read_other_tracks(&path).unwrap();
+        assert_eq!(others.len(), 1);
+        assert_eq!(others[&3], vec![[9.0, 8.0, 13.0]]);
         std::fs::remove_dir_all(&dir).unwrap();
     }
 }

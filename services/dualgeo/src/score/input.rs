@@ -75,9 +75,12 @@ pub fn read_track(path: &Path) -> Result<Vec<TrackRow>> {
             }
             None => 0,
         };
+        // Empty on a row without them (another vehicle's, when the target's estimate
+        // of its pair was rejected).
+        let present = |c: usize| record.get(c).is_some_and(|t| !t.is_empty());
         let yaw_bias_deg = match bias {
-            Some((l, r)) => Some([number(l)?, number(r)?]),
-            None => None,
+            Some((l, r)) if present(l) || present(r) => Some([number(l)?, number(r)?]),
+            _ => None,
         };
         rows.push(TrackRow {
             t_s: number(t)?,
@@ -209,7 +212,7 @@ pub fn load(recording: &Path, track: &Path, warm_up_s: f64) -> Result<Loaded> {
                 p: e.p,
             })
             .collect();
-        if let Some([bl, br]) = estimates[k].first().and_then(|e| e.yaw_bias_deg) {
+        if let Some([bl, br]) = estimates[k].iter().find_map(|e| e.yaw_bias_deg) {
             bias_errors_deg.push([
                 wrap_deg(bl - bias(pair.left)).abs(),
                 wrap_deg(br - bias(pair.right)).abs(),

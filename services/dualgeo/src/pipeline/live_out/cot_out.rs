@@ -3,7 +3,9 @@
 //! WGS84 ellipsoid) and ce / le, the schema's circular and linear 1σ errors (h_acc and
 //! v_acc; 9999999 when unknown, the schema's "unknown"); `how` is `m-f` (machine,
 //! fused: imagery and navigation). The track element carries course and speed when the
-//! temporal filter gives a velocity.
+//! temporal filter gives a velocity. Every other vehicle's track gets events of its own
+//! under a uid of its own (`<target uid>-vehicle-<track id>`), and one last event
+//! stale at once when the track is deleted (a TAK client then drops it).
 
 use super::udp::UdpSender;
 use super::{LiveOutArgs, TargetFix};
@@ -102,6 +104,35 @@ impl CotOut {
         );
         if self.udp.send(xml.as_bytes(), stats) {
             stats.count("cot.sent", 1);
+        }
+    }
+
+    /// The uid of other vehicle `id`'s events.
+    pub fn track_uid(&self, id: u32) -> String {
+        format!("{}-vehicle-{id}", self.uid)
+    }
+
+    /// Another vehicle's track (counted `cot.tracks_sent`).
+    pub fn send_track(&mut self, id: u32, fix: &TargetFix, stats: &mut StageStats) {
+        let uid = self.track_uid(id);
+        let xml = cot_event(fix, &uid, &self.cot_type, SystemTime::now(), self.stale);
+        if self.udp.send(xml.as_bytes(), stats) {
+            stats.count("cot.tracks_sent", 1);
+        }
+    }
+
+    /// A deleted track's last event, stale at once (counted `cot.tracks_stale`).
+    pub fn send_stale(&mut self, id: u32, last: &TargetFix, stats: &mut StageStats) {
+        let uid = self.track_uid(id);
+        let xml = cot_event(
+            last,
+            &uid,
+            &self.cot_type,
+            SystemTime::now(),
+            Duration::ZERO,
+        );
+        if self.udp.send(xml.as_bytes(), stats) {
+            stats.count("cot.tracks_stale", 1);
         }
     }
 }

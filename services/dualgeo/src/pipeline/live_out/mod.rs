@@ -1,6 +1,9 @@
 //! The target, live, to ground-control software (issue #14): every valid estimate as a
 //! MAVLink CAMERA_TRACKING_GEO_STATUS (`--mavlink-out`, with a 1 Hz HEARTBEAT) and as a
-//! Cursor-on-Target event (`--cot-out`), over UDP. Sending never stops the run: a send
+//! Cursor-on-Target event (`--cot-out`), over UDP. The other vehicles' tracks go out
+//! as CoT events of their own (a uid per track, stale when it is deleted); MAVLink
+//! carries the target only (the common dialect has no geolocation message with a
+//! target id). Sending never stops the run: a send
 //! that fails or would block is dropped and counted (`mavlink.send_failed`,
 //! `cot.send_failed`); what was sent is counted (`mavlink.sent`, `mavlink.heartbeats`,
 //! `cot.sent`) in the supervisor's counters.
@@ -16,8 +19,9 @@ use super::track::{geodetic, one_sigma};
 use acquisition::recording::Origin;
 use anyhow::{bail, Result};
 use clap::Args;
-use shared_types::messages::{EstimateMsg, EstimateStatus};
+use shared_types::messages::{EstimateMsg, EstimateStatus, TrackEstimate};
 use shared_types::stats::StageStats;
+use std::collections::BTreeMap;
 use std::time::{Duration, Instant};
 
 pub use cot_out::CotOut;
@@ -70,6 +74,24 @@ pub struct TargetFix {
 }
 
 impl TargetFix {
+    /// Another vehicle's track `t` of estimate `e` (its range unknown).
+    pub fn of_track(e: &EstimateMsg, t: &TrackEstimate, origin: &Origin) -> Self {
+        let (lat_deg, lon_deg, hae_m) = geodetic(origin, &t.position);
+        let h_acc_m = (t.covariance_xy[0] + t.covariance_xy[3]).max(0.0).sqrt();
+        Self {
+            pair_seq: e.pair_seq,
+            lat_deg,
+            lon_deg,
+            hae_m,
+            h_acc_m,
+            v_acc_m: t.altitude_std_error_m,
+            vel_north_mps: t.velocity_mps[1],
+            vel_east_mps: t.velocity_mps[0],
+            vel_acc_mps: f64::NAN,
+            range_m: f64::NAN,
+        }
+    }
+
     /// The fix of a valid estimate; `None` for a rejection.
     pub fn of(e: &EstimateMsg, origin: &Origin) -> Option<Self> {
         if e.status != EstimateStatus::Ok as u32 {
@@ -99,6 +121,8 @@ pub struct LiveOutputs {
     mavlink: Option<MavlinkOut>,
     cot: Option<CotOut>,
     last_heartbeat: Option<Instant>,
+    /// The other vehicles' tracks of the last estimate, with their last fix.
+    tracks: BTreeMap<u32, TargetFix>,
 }
 
 impl LiveOutputs {
@@ -134,20 +158,40 @@ impl LiveOutputs {
                 .map(|a| CotOut::open(a, args))
                 .transpose()?,
             last_heartbeat: None,
+            tracks: BTreeMap::new(),
         })
     }
 
-    /// Sends `e` to every output (a rejection sends nothing).
+    /// Sends `e` to every output: the target when its estimate is valid, the other
+    /// vehicles' tracks over CoT (and a stale event for each track gone since the last
+    /// estimate).
     pub fn push(&mut self, e: &EstimateMsg, stats: &mut StageStats) {
-        let Some(fix) = self.origin.as_ref().and_then(|o| TargetFix::of(e, o)) else {
+        let Some(origin) = self.origin.as_ref() else {
             return;
         };
-        if let Some(m) = &mut self.mavlink {
-            m.send_fix(&fix, stats);
+        if let Some(fix) = TargetFix::of(e, origin) {
+            if let Some(m) = &mut self.mavlink {
+                m.send_fix(&fix, stats);
+            }
+            if let Some(c) = &mut self.cot {
+                c.send_fix(&fix, stats);
+            }
         }
-        if let Some(c) = &mut self.cot {
-            c.send_fix(&fix, stats);
+        let Some(c) = &mut self.cot else {
+            return;
+        };
+        let now: BTreeMap<u32, TargetFix> = e
+            .tracks()
+            .iter()
+            .map(|t| (t.id, TargetFix::of_track(e, t, origin)))
+            .collect();
+        for (id, fix) in &now {
+            c.send_track(*id, fix, stats);
         }
+        for (id, last) in self.tracks.iter().filter(|(id, _)| !now.contains_key(id)) {
+            c.send_stale(*id, last, stats);
+        }
+        self.tracks = now;
     }
 
     /// The 1 Hz HEARTBEAT (called on the supervisor's 25 ms tick).
@@ -160,5 +204,89 @@ impl LiveOutputs {
             self.last_heartbeat = Some(Instant::now());
             m.send_heartbeat(stats);
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn origin() -> Origin {
+        Origin {
+            lat_deg: 30.0,
+            lon_deg: 120.0,
+            alt_m: 10.0,
+        }
+    }
+
+    fn estimate(pair_seq: u64, ids: &[u32]) -> EstimateMsg {
+        let mut e = EstimateMsg {
+            pair_seq,
+            t_s: pair_seq as f64 / 30.0,
+            position: [1.0, 2.0, 13.0],
+            ..Default::default()
+        };
+        for (slot, id) in e.tracks.iter_mut().zip(ids) {
+            *slot = TrackEstimate {
+                id: *id,
+                quality: 1,
+                position: [10.0 * f64::from(*id), 0.0, 13.0],
+                covariance_xy: [0.25, 0.0, 0.0, 0.25],
+                altitude_std_error_m: 0.5,
+                velocity_mps: [1.0, 0.0],
+            };
+        }
+        e.track_count = ids.len() as u64;
+        e
+    }
+
+    /// Every other vehicle's track is an event of its own uid; a track gone is sent
+    /// once more, stale at once.
+    #[test]
+    fn tracks_go_out_as_their_own_cot_events_and_go_stale_when_deleted() {
+        let socket = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();
+        socket
+            .set_read_timeout(Some(Duration::from_secs(2)))
+            .unwrap();
+        let port = socket.local_addr().unwrap().port();
+        let args = LiveOutArgs {
+            mavlink_out: None,
+            mavlink_system_id: 255,
+            mavlink_component_id: 100,
+            geoid_height_m: None,
+            cot_out: Some(format!("udp://127.0.0.1:{port}")),
+            cot_type: "a-u-G-E-V".into(),
+            cot_stale_s: 5.0,
+        };
+        let mut live = LiveOutputs::open(&args, Some(origin()), 0.0).unwrap();
+        let mut stats = StageStats::new("t");
+        let receive = || {
+            let mut buf = [0u8; 4096];
+            let n = socket.recv(&mut buf).unwrap();
+            String::from_utf8_lossy(&buf[..n]).into_owned()
+        };
+        // The target's estimate is valid: its event first, then the tracks'.
+        let mut e = estimate(1, &[1, 2]);
+        live.push(&e, &mut stats);
+        let target = receive();
+        assert!(!target.contains("-vehicle-"), "{target}");
+        let one = receive();
+        assert!(one.contains("-vehicle-1\""), "{one}");
+        assert!(receive().contains("-vehicle-2\""));
+        // Track 2 gone, the target rejected: track 1's event, then track 2 stale.
+        e = estimate(2, &[1]);
+        e.status = EstimateStatus::Rejected as u32;
+        live.push(&e, &mut stats);
+        assert!(receive().contains("-vehicle-1\""));
+        let gone = receive();
+        assert!(gone.contains("-vehicle-2\""), "{gone}");
+        let attr = |xml: &str, name: &str| {
+            let at = xml.find(&format!(" {name}=\"")).unwrap() + name.len() + 3;
+            xml[at..at + 24].to_string()
+        };
+        assert_eq!(attr(&gone, "time"), attr(&gone, "stale"), "{gone}");
+        assert_eq!(stats.counter("cot.sent"), 1);
+        assert_eq!(stats.counter("cot.tracks_sent"), 3);
+        assert_eq!(stats.counter("cot.tracks_stale"), 1);
     }
 }

@@ -9,6 +9,7 @@
 //! moment the message was published in the pipeline.
 
 use super::super::live_out::TargetFix;
+use acquisition::recording::Origin;
 use base64::Engine;
 use nalgebra::{Rotation3, UnitQuaternion};
 use opencv::core as cv;
@@ -135,6 +136,37 @@ pub fn quality_message(time: &Value, e: &EstimateMsg) -> Value {
         "yaw_bias_left_deg": finite_or_null(e.yaw_bias_deg[0]),
         "yaw_bias_right_deg": finite_or_null(e.yaw_bias_deg[1]),
     })
+}
+
+/// dualgeo.Targets of one pair: the target as id 0 when its estimate is valid, then
+/// every other vehicle's track, geodetic (ellipsoidal height) with 1σ accuracies.
+pub fn targets_message(time: &Value, e: &EstimateMsg, origin: &Origin) -> Value {
+    let quality = |q: u64| geolocation::Quality::from_index(q).map_or("converging", |q| q.name());
+    let target = TargetFix::of(e, origin).map(|f| {
+        json!({
+            "track_id": 0,
+            "latitude": f.lat_deg,
+            "longitude": f.lon_deg,
+            "altitude": f.hae_m,
+            "h_acc_m": finite_or_null(f.h_acc_m),
+            "v_acc_m": finite_or_null(f.v_acc_m),
+            "quality": quality(e.quality),
+        })
+    });
+    let others = e.tracks().iter().map(|t| {
+        let f = TargetFix::of_track(e, t, origin);
+        json!({
+            "track_id": t.id,
+            "latitude": f.lat_deg,
+            "longitude": f.lon_deg,
+            "altitude": f.hae_m,
+            "h_acc_m": finite_or_null(f.h_acc_m),
+            "v_acc_m": finite_or_null(f.v_acc_m),
+            "quality": quality(u64::from(t.quality)),
+        })
+    });
+    let targets: Vec<Value> = target.into_iter().chain(others).collect();
+    json!({"timestamp": time, "pair_seq": e.pair_seq, "targets": targets})
 }
 
 /// foxglove.PoseInFrame of a valid estimate's ENU position (no orientation is

@@ -215,6 +215,12 @@ impl Recorder {
         }
         let m = encode::latency_message(&time, e, &times);
         self.write(Channel::Latency, log_ns, e.published_ns, &m);
+        if let Some(origin) = &self.origin {
+            if encode::is_valid(e) || !e.tracks().is_empty() {
+                let m = encode::targets_message(&time, e, origin);
+                self.write(Channel::Targets, log_ns, e.published_ns, &m);
+            }
+        }
     }
 
     /// Takes everything queued; `true` if there was anything.

@@ -2,8 +2,9 @@
 //! (https://docs.foxglove.dev/docs/visualization/message-schemas) in their JSON Schema
 //! form, messages JSON-encoded (`bytes` fields as base64, as Foxglove's JSON encoding
 //! defines). Only the fields dualgeo fills are spelled out; the titles are what Foxglove
-//! matches a panel on. Stage latency and the estimate's quality have no well-known
-//! schema: `dualgeo.StageLatency`, `dualgeo.TargetQuality`.
+//! matches a panel on. Stage latency, the estimate's quality and the list of every
+//! vehicle's track have no well-known schema: `dualgeo.StageLatency`,
+//! `dualgeo.TargetQuality`, `dualgeo.Targets`.
 
 /// Schema encoding of every schema here (MCAP's well-known `jsonschema`).
 pub const SCHEMA_ENCODING: &str = "jsonschema";
@@ -21,8 +22,10 @@ pub struct ChannelSpec {
 /// measured camera pose in the world ENU frame, the detection drawn on the image. Then
 /// the target (a geodetic fix with covariance, and its ENU position) and the latency of
 /// each stage for that estimate, then how far the estimate can be trusted (its
-/// quality state, h_acc, v_acc and both yaw biases).
-pub const CHANNELS: [ChannelSpec; 10] = [
+/// quality state, h_acc, v_acc and both yaw biases), then every vehicle's track at
+/// the pair (`/targets`: the target as id 0 when its estimate is valid, and the other
+/// vehicles' tracks with their ids).
+pub const CHANNELS: [ChannelSpec; 11] = [
     ChannelSpec {
         topic: "/left/image",
         schema: "foxglove.CompressedImage",
@@ -63,6 +66,10 @@ pub const CHANNELS: [ChannelSpec; 10] = [
         topic: "/target/quality",
         schema: "dualgeo.TargetQuality",
     },
+    ChannelSpec {
+        topic: "/targets",
+        schema: "dualgeo.Targets",
+    },
 ];
 
 /// Index into [`CHANNELS`].
@@ -75,6 +82,7 @@ pub enum Channel {
     TargetPose,
     Latency,
     TargetQuality,
+    Targets,
 }
 
 impl Channel {
@@ -87,6 +95,7 @@ impl Channel {
             Channel::TargetPose => 7,
             Channel::Latency => 8,
             Channel::TargetQuality => 9,
+            Channel::Targets => 10,
         }
     }
 }
@@ -233,6 +242,33 @@ pub fn schema_text(name: &str) -> Option<String> {
             ],
             &["timestamp", "pair_seq", "quality", "h_acc_m", "v_acc_m"],
         ),
+        "dualgeo.Targets" => {
+            let target = object(
+                "dualgeo.Target",
+                &[
+                    ("track_id", s("integer")),
+                    ("latitude", s("number")),
+                    ("longitude", s("number")),
+                    ("altitude", s("number")),
+                    ("h_acc_m", s("number")),
+                    ("v_acc_m", s("number")),
+                    (
+                        "quality",
+                        r#"{"type":"string","enum":["converging","tracking","coasting"]}"#.into(),
+                    ),
+                ],
+                &["track_id", "latitude", "longitude", "altitude", "quality"],
+            );
+            object(
+                name,
+                &[
+                    ("timestamp", TIME.into()),
+                    ("pair_seq", s("integer")),
+                    ("targets", array(&target)),
+                ],
+                &["timestamp", "pair_seq", "targets"],
+            )
+        }
         _ => return None,
     };
     Some(text)
