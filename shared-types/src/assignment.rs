@@ -1,26 +1,34 @@
 //! Optimal assignment between two sets (detections across the two views, estimates to
-//! tracks, truth to tracks in the scorer), with `pathfinding`'s Kuhn–Munkres (O(n³)). Either side may be the larger; the crate
-//! wants the rows to be the smaller side and integer weights, so this transposes and
-//! scales metres to micrometres (differences below 1 µm tie).
+//! tracks, truth to tracks in the scorer), with `pathfinding`'s Kuhn–Munkres (O(n³)).
+//! Either side may be the larger; the crate wants the rows to be the smaller side and
+//! integer weights, so this transposes and scales costs by 10⁶ (differences below 10⁻⁶
+//! tie), each clamped to 10¹² so that the crate's sums cannot overflow whatever the
+//! caller's units.
 
 use pathfinding::matrix::Matrix;
 use pathfinding::prelude::{kuhn_munkres, kuhn_munkres_min};
 
 const SCALE: f64 = 1e6;
+/// Largest scaled cost or weight: sums over a million entries stay far inside i64.
+const MAX_SCALED: f64 = 1e12;
 
 /// The row→column assignment of least total cost: every row of the smaller side gets
 /// a column. `cost[r][c]` must be finite and ≥ 0; rows all the same length.
 pub fn min_cost(cost: &[Vec<f64>]) -> Vec<Option<usize>> {
     solve(
         cost,
-        |c| (c * SCALE).round() as i64,
+        |c| (c * SCALE).round().clamp(0.0, MAX_SCALED) as i64,
         |m| kuhn_munkres_min(m).1,
     )
 }
 
 /// The row→column assignment of greatest total weight (counts).
 pub fn max_weight(weight: &[Vec<u64>]) -> Vec<Option<usize>> {
-    solve(weight, |w| w as i64, |m| kuhn_munkres(m).1)
+    solve(
+        weight,
+        |w| w.min(MAX_SCALED as u64) as i64,
+        |m| kuhn_munkres(m).1,
+    )
 }
 
 fn solve<T: Copy>(
@@ -111,6 +119,14 @@ mod tests {
                 "{rows}x{columns}"
             );
         }
+    }
+
+    /// Costs far beyond any metric's are clamped, not overflowed.
+    #[test]
+    fn huge_costs_do_not_overflow() {
+        let a = min_cost(&[vec![1e20, 1.0], vec![1.0, f64::MAX]]);
+        assert_eq!(a, vec![Some(1), Some(0)]);
+        assert_eq!(max_weight(&[vec![u64::MAX, 0]]), vec![Some(0)]);
     }
 
     #[test]

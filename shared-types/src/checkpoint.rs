@@ -14,8 +14,9 @@ use serde::Serialize;
 use std::path::{Path, PathBuf};
 
 const MAGIC: &[u8; 4] = b"DGCK";
-/// Bumped whenever a checkpointed type changes shape.
-pub const VERSION: u32 = 1;
+/// Bumped whenever a checkpointed type changes shape (2: the geolocation checkpoint
+/// holds the other vehicles' tracks).
+pub const VERSION: u32 = 2;
 const HEADER: usize = 12;
 
 #[derive(Debug, thiserror::Error)]

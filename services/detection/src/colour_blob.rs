@@ -516,10 +516,19 @@ impl ColourBlobDetector {
         check_bgr(frame)?;
         if !self.last_whole {
             let (gate, gated) = (self.gate.take(), self.gated_blobs);
-            opencv::imgproc::cvt_color_def(frame, &mut self.hsv, opencv::imgproc::COLOR_BGR2HSV)?;
-            let look = self.pick_blob(self.config.value_min as f64, None, None);
+            let look = opencv::imgproc::cvt_color_def(
+                frame,
+                &mut self.hsv,
+                opencv::imgproc::COLOR_BGR2HSV,
+            )
+            .map_err(DetectError::from)
+            .and_then(|()| self.pick_blob(self.config.value_min as f64, None, None));
             (self.gate, self.gated_blobs) = (gate, gated);
-            look?;
+            if let Err(e) = look {
+                // The blob list may be half the old look's: list nothing.
+                self.blobs.clear();
+                return Err(e);
+            }
             self.last_whole = true;
         }
         for b in &self.blobs {

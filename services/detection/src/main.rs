@@ -221,6 +221,7 @@ impl Detecting {
                 gate_of(&self.predictions, &header, &self.gate_config, stats),
             ),
         });
+        let detector_ok = matches!(detected, Ok(Ok(_)));
         let found = match detected {
             Ok(Ok(d)) => d,
             Ok(Err(e)) => {
@@ -276,7 +277,8 @@ impl Detecting {
             msg.centre = d.centre;
             msg.confidence = d.confidence as f64;
         }
-        if let (true, Ok(mat)) = (self.candidates, &mat) {
+        // A frame the detector failed on has no candidates either.
+        if let (true, true, Ok(mat)) = (self.candidates, detector_ok, &mat) {
             self.publish_candidates(&mut msg, mat);
         }
         let done = monotonic_ns();

@@ -19,8 +19,8 @@
 //!
 //! Several targets (`[tracks]`, on by default): the set's other vehicles are located
 //! with the target's yaw biases and tracked (`geolocation::others_message`, its
-//! counters); the confirmed tracks ride in the estimate message. They are not
-//! checkpointed: a restarted service starts them again with new ids.
+//! counters); the confirmed tracks ride in the estimate message. They are
+//! checkpointed with the filter: a restarted service keeps their ids.
 
 use anyhow::{Context, Result};
 use clap::Parser;
@@ -52,6 +52,8 @@ fn resume(
     path: Option<&std::path::Path>,
     config: &EstimatorConfig,
     temporal: &mut Option<TemporalEstimator>,
+    tracks: &mut Tracks,
+    track_config: TrackConfig,
     stats: &mut StageStats,
 ) -> Option<(u64, f64)> {
     let found = match checkpoint::read::<Resume>(path?, CHECKPOINT_KIND) {
@@ -68,6 +70,15 @@ fn resume(
             Err(e) => {
                 stats.count("checkpoint_refused", 1);
                 tracing::warn!("filter state ignored, starting fresh: {e}");
+            }
+        }
+    }
+    if let Some(snap) = &found.tracks {
+        match Tracks::restore(track_config, snap) {
+            Ok(t) => *tracks = t,
+            Err(e) => {
+                stats.count("checkpoint_refused", 1);
+                tracing::warn!("tracks ignored, starting fresh: {e}");
             }
         }
     }
@@ -114,7 +125,14 @@ fn run() -> Result<()> {
         _ => None,
     };
     let state_path = args.service.state_file("geolocation.ckpt");
-    let mut last = resume(state_path.as_deref(), &config, &mut temporal, &mut stats);
+    let mut last = resume(
+        state_path.as_deref(),
+        &config,
+        &mut temporal,
+        &mut tracks,
+        track_config,
+        &mut stats,
+    );
     let mut saver = StatsSaver::new(&args.service);
     let mut trace = args.service.tracer("geolocation");
     tracing::info!(run = endpoint.run_id(), method = ?config.method, incarnation = args.service.incarnation, "geolocation ready");
@@ -168,6 +186,7 @@ fn run() -> Result<()> {
                     last_pair_seq: msg.pair_seq,
                     last_t_s: msg.t_s,
                     filter: temporal.as_ref().map(TemporalEstimator::snapshot),
+                    tracks: track_config.enabled.then(|| tracks.snapshot()),
                 };
                 let t0 = monotonic_ns();
                 match checkpoint::write(path, CHECKPOINT_KIND, &state) {

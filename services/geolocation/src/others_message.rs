@@ -93,7 +93,6 @@ fn locate_relative(
         covariance_xy: target_xy + fix.covariance_xy_given_biases,
         covariance_xy_given_biases: target_xy + fix.covariance_xy_given_biases,
         altitude_std_error_m: fix.altitude_std_error_m.hypot(msg.altitude_std_error_m),
-        images_used: fix.images_used,
     })
 }
 
@@ -161,6 +160,11 @@ pub fn add_tracks(
             altitude_std_error_m: r.altitude_std_m,
             velocity_mps: r.velocity_mps,
         };
+    }
+    // A track with a non-finite value is left out (counted), the rest close up.
+    let mut kept = 0;
+    for i in 0..reports.len().min(MAX_TRACKS) {
+        let slot = msg.tracks[i];
         let finite = slot
             .position
             .iter()
@@ -169,12 +173,16 @@ pub fn add_tracks(
             .all(|v| v.is_finite())
             && slot.altitude_std_error_m.is_finite();
         if finite {
-            msg.track_count += 1;
+            msg.tracks[kept] = slot;
+            kept += 1;
         } else {
             stats.count("tracks_non_finite", 1);
-            break;
         }
     }
+    for slot in &mut msg.tracks[kept..] {
+        *slot = TrackEstimate::default();
+    }
+    msg.track_count = kept as u64;
 }
 
 #[cfg(test)]

@@ -21,6 +21,8 @@ pub struct Resume {
     pub last_t_s: f64,
     /// The temporal filter (`None` for the per-window methods, which keep no state).
     pub filter: Option<TemporalSnapshot>,
+    /// The other vehicles' tracks (`None` with `[tracks] enabled = false`).
+    pub tracks: Option<crate::tracks::TracksSnapshot>,
 }
 
 /// Whether a set must be dropped unseen (`stale_sets`): its time is not finite, or not

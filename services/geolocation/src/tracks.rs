@@ -16,9 +16,12 @@
 //!   (under the bridge: ~1.3 s) coasts on its prediction and takes its fixes again
 //!   when it comes out: its id is kept.
 //!
-//! Not yet: the tracks are not checkpointed (a restarted geolocation service starts
-//! them again with new ids), and a fix's error is taken as independent from pair to
-//! pair although the shared biases' error is not.
+//! **Restart**: [`Tracks::snapshot`] and [`Tracks::restore`] carry every track, the next
+//! id and the noise scale across a restart of the geolocation service (its
+//! checkpoint): ids stay stable.
+//!
+//! Not yet: a fix's error is taken as independent from pair to pair although the
+//! shared biases' error is not.
 
 use crate::shared_bias::OtherFix;
 use nalgebra::{Matrix2, Matrix4, Vector2, Vector4};
@@ -48,7 +51,7 @@ pub struct TrackConfig {
     pub fix_sigma_floor_m: f64,
     /// A fix this near the target's own estimate is the target, m.
     pub target_exclusion_m: f64,
-    /// Most confirmed tracks reported (the estimate message's room).
+    /// Most confirmed tracks reported (at most the estimate message's room, 8).
     pub max_tracks: usize,
 }
 
@@ -83,13 +86,16 @@ impl TrackConfig {
             && self.target_exclusion_m >= 0.0
             && (1..=32).contains(&self.confirm_window)
             && (1..=self.confirm_window).contains(&self.confirm_hits)
-            && self.max_tracks <= 64;
+            && self.max_tracks <= shared_types::messages::MAX_TRACKS
+            && self.gate_chi2 <= 1e6;
         if ok {
             Ok(())
         } else {
             Err(format!(
-                "[tracks]: need 1 <= confirm_hits <= confirm_window <= 32, max_tracks <= 64, \
-                 positive finite times, sigmas and gate, target_exclusion_m >= 0: {self:?}"
+                "[tracks]: need 1 <= confirm_hits <= confirm_window <= 32, max_tracks <= {}, \
+                 positive finite times, sigmas and gate (gate_chi2 <= 1e6), \
+                 target_exclusion_m >= 0: {self:?}",
+                shared_types::messages::MAX_TRACKS
             ))
         }
     }
@@ -136,6 +142,7 @@ pub struct TrackCounts {
 
 #[derive(Debug, Clone, PartialEq)]
 struct Track {
+    // (Its checkpoint form is [`TrackState`].)
     /// 0 while tentative.
     id: u32,
     /// (x, y, v_east, v_north) and its covariance.
@@ -158,7 +165,13 @@ pub struct Tracks {
     tracks: Vec<Track>,
     next_id: u32,
     counts: TrackCounts,
-    /// The scale of the fixes' covariance the innovations say (see [`Tracks::noise_scale`]).
+    /// How much the fixes' stated covariance R is scaled, learnt from the confirmed
+    /// tracks' innovations by covariance matching (Mehra 1972): with F the floor
+    /// (`fix_sigma_floor_m`² I), E[ν νᵀ] = H P Hᵀ + s R + F, so each update gives
+    /// s ≈ (|ν|² − tr H P Hᵀ − tr F) / tr R, averaged over the last ~200 updates and
+    /// kept in [0.02, 10]. A fix's covariance from one window holds each image's GPS
+    /// error, which the difference with the target cancels (`others_message`): on
+    /// `multi_town` the scale settles near 0.3.
     noise_scale: f64,
 }
 
@@ -166,6 +179,30 @@ pub struct Tracks {
 const NOISE_SCALE_MEMORY: f64 = 200.0;
 /// Bounds of the noise scale.
 const NOISE_SCALE_RANGE: (f64, f64) = (0.02, 10.0);
+
+/// One track as a checkpoint keeps it.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct TrackState {
+    pub id: u32,
+    /// (x, y, v_east, v_north).
+    pub x: [f64; 4],
+    /// Row-major 4 × 4.
+    pub p: [f64; 16],
+    pub z: f64,
+    pub z_var: f64,
+    pub t_s: f64,
+    pub last_fix_s: f64,
+    pub hits: u32,
+    pub pairs: u32,
+}
+
+/// [`Tracks`] as a checkpoint keeps them.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct TracksSnapshot {
+    pub tracks: Vec<TrackState>,
+    pub next_id: u32,
+    pub noise_scale: f64,
+}
 
 /// Speed uncertainty of a new track (1σ, m/s): a car in town.
 const BIRTH_SPEED_SIGMA_MPS: f64 = 8.0;
@@ -182,18 +219,89 @@ impl Tracks {
         })
     }
 
-    /// How much the fixes' stated covariance is scaled: learnt from the confirmed
-    /// tracks' innovations by covariance matching (Mehra 1972): E[ν νᵀ] = H P Hᵀ + s R,
-    /// so each update gives s ≈ (|ν|² − tr H P Hᵀ) / tr R, averaged over the last
-    /// ~200 updates and kept in [0.02, 10]. A fix's covariance from one window holds
-    /// each image's GPS error, which the difference with the target cancels
-    /// (`others_message`): on `multi_town` the scale settles well below 1.
-    pub fn noise_scale(&self) -> f64 {
-        self.noise_scale
-    }
-
     pub fn take_counts(&mut self) -> TrackCounts {
         std::mem::take(&mut self.counts)
+    }
+
+    /// Every track, the next id and the noise scale, for a checkpoint.
+    pub fn snapshot(&self) -> TracksSnapshot {
+        TracksSnapshot {
+            tracks: self
+                .tracks
+                .iter()
+                .map(|t| TrackState {
+                    id: t.id,
+                    x: [t.x[0], t.x[1], t.x[2], t.x[3]],
+                    p: std::array::from_fn(|k| t.p[(k / 4, k % 4)]),
+                    z: t.z,
+                    z_var: t.z_var,
+                    t_s: t.t_s,
+                    last_fix_s: t.last_fix_s,
+                    hits: t.hits,
+                    pairs: t.pairs,
+                })
+                .collect(),
+            next_id: self.next_id,
+            noise_scale: self.noise_scale,
+        }
+    }
+
+    /// Tracks from a checkpoint, refused (with the reason) when a value is not finite
+    /// or out of its range (a negative variance, a covariance not symmetric, a
+    /// tentative track older than its window), an id repeats or is not below the next
+    /// id, or there are more than `4 × max_tracks` + 64 of them (a checkpoint is read
+    /// from disk: untrusted).
+    pub fn restore(config: TrackConfig, snap: &TracksSnapshot) -> Result<Self, String> {
+        let mut tracks = Self::new(config)?;
+        if snap.tracks.len() > 4 * config.max_tracks + 64 {
+            return Err(format!("{} tracks", snap.tracks.len()));
+        }
+        let (lo, hi) = NOISE_SCALE_RANGE;
+        if !(lo..=hi).contains(&snap.noise_scale) || !(1..u32::MAX / 2).contains(&snap.next_id) {
+            return Err("noise scale or next id out of range".into());
+        }
+        let mut ids = std::collections::BTreeSet::new();
+        for t in &snap.tracks {
+            let finite =
+                t.x.iter()
+                    .chain(&t.p)
+                    .chain([&t.z, &t.z_var, &t.t_s, &t.last_fix_s])
+                    .all(|v| v.is_finite());
+            if !finite {
+                return Err(format!("track {} is not finite", t.id));
+            }
+            let p = Matrix4::from_row_slice(&t.p);
+            let symmetric = (p - p.transpose()).abs().max() <= 1e-9 * (1.0 + p.abs().max());
+            let in_range = t.z_var >= 0.0
+                && (0..4).all(|k| p[(k, k)] >= 0.0)
+                && symmetric
+                && (t.id != 0
+                    || (t.pairs < config.confirm_window && t.hits < 1 << config.confirm_window));
+            if !in_range {
+                return Err(format!("track {} is out of range", t.id));
+            }
+            if t.id != 0 && (t.id >= snap.next_id || !ids.insert(t.id)) {
+                return Err(format!(
+                    "track id {} repeats or is not below {}",
+                    t.id, snap.next_id
+                ));
+            }
+            tracks.tracks.push(Track {
+                id: t.id,
+                x: Vector4::from_column_slice(&t.x),
+                p: Matrix4::from_row_slice(&t.p),
+                z: t.z,
+                z_var: t.z_var,
+                t_s: t.t_s,
+                last_fix_s: t.last_fix_s,
+                hits: t.hits,
+                pairs: t.pairs,
+                updated: false,
+            });
+        }
+        tracks.next_id = snap.next_id;
+        tracks.noise_scale = snap.noise_scale;
+        Ok(tracks)
     }
 
     /// One pair at `t_s`: the other vehicles' `fixes` and the target's own estimate
@@ -302,10 +410,10 @@ impl Tracks {
         self.tracks.retain_mut(|t| {
             if t.id == 0 {
                 t.hits = ((t.hits << 1) | u32::from(t.updated)) & window_mask;
-                t.pairs += 1;
+                t.pairs = t.pairs.saturating_add(1);
                 if t.hits.count_ones() >= c.confirm_hits {
                     t.id = next_id;
-                    next_id += 1;
+                    next_id = next_id.saturating_add(1);
                     counts.confirmed += 1;
                     return true;
                 }
@@ -406,7 +514,6 @@ mod tests {
             covariance_xy: Matrix2::identity() * 0.04,
             covariance_xy_given_biases: Matrix2::identity() * 0.04,
             altitude_std_error_m: 0.5,
-            images_used: 8,
         }
     }
 
@@ -475,6 +582,50 @@ mod tests {
             assert!(out.is_empty());
         }
         assert_eq!(tracks.take_counts().target_fixes, 10);
+    }
+
+    /// A restart in the middle: the restored tracks go on with the same ids and give
+    /// what the uninterrupted ones give; a tampered checkpoint is refused.
+    #[test]
+    fn tracks_survive_a_restart_with_their_ids() {
+        let config = TrackConfig::default();
+        let feed = |tracks: &mut Tracks, from: usize, to: usize| -> Vec<TrackReport> {
+            let mut out = Vec::new();
+            for k in from..to {
+                let t = k as f64 * DT;
+                out = tracks.update(t, &[fix(0.0, 10.0 * t), fix(5.0, 10.0 * t)], None);
+            }
+            out
+        };
+        let mut straight = Tracks::new(config).unwrap();
+        let end = feed(&mut straight, 0, 40);
+        let mut before = Tracks::new(config).unwrap();
+        feed(&mut before, 0, 20);
+        // Through the service's checkpoint file format.
+        let path = std::env::temp_dir().join(format!("dualgeo-tracks-{}.ckpt", std::process::id()));
+        shared_types::checkpoint::write(&path, 99, &before.snapshot()).unwrap();
+        let snap: TracksSnapshot = shared_types::checkpoint::read(&path, 99).unwrap().unwrap();
+        std::fs::remove_file(&path).unwrap();
+        let mut after = Tracks::restore(config, &snap).unwrap();
+        assert_eq!(feed(&mut after, 20, 40), end);
+        let mut bad = snap.clone();
+        bad.tracks[0].x[0] = f64::NAN;
+        assert!(Tracks::restore(config, &bad).is_err());
+        let mut bad = snap.clone();
+        bad.tracks[1].id = bad.tracks[0].id;
+        assert!(Tracks::restore(config, &bad).is_err());
+        let mut bad = snap.clone();
+        bad.next_id = 1;
+        assert!(Tracks::restore(config, &bad).is_err());
+        let mut bad = snap.clone();
+        bad.tracks[0].z_var = -1.0;
+        assert!(Tracks::restore(config, &bad).is_err());
+        let mut bad = snap.clone();
+        bad.tracks[0].p[1] = 5.0;
+        assert!(Tracks::restore(config, &bad).is_err());
+        let mut bad = snap;
+        bad.next_id = u32::MAX;
+        assert!(Tracks::restore(config, &bad).is_err());
     }
 
     #[test]

@@ -115,6 +115,9 @@ pub fn checkpoint(data: &[u8]) {
         if let Some(snap) = &resume.filter {
             let _ = TemporalEstimator::restore(EstimatorConfig::default(), snap);
         }
+        if let Some(snap) = &resume.tracks {
+            let _ = geolocation::tracks::Tracks::restore(Default::default(), snap);
+        }
     }
     if let Ok(index) = checkpoint::decode::<RingIndex>(INDEX_KIND, part(2)) {
         let Ok(mut chain) = VisionChain::new(MatchingConfig::default(), EstimatorConfig::default())

@@ -203,6 +203,9 @@ impl MotionDetector {
         gate: Option<Gate>,
     ) -> Result<Option<Detection>, DetectError> {
         crate::check_bgr(frame)?;
+        // The movers are this frame's only: a frame that finds none (no history, the
+        // ground lost) must not leave the other camera's in place.
+        self.movers.clear();
         let c = self.config;
         let cam = self
             .cameras

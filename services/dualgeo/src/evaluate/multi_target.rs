@@ -3,9 +3,10 @@
 //! ([`monte_carlo::seeded`]: the route's start, the biases' signs and every noise
 //! follow the seed; white navigation errors), rendered to a recording (JPEG 95),
 //! streamed through `dualgeo run` (the four real services, `--rate max`) and scored
-//! against its truth_targets.csv ([`crate::score`]). Writes OUT/multi-target.md and
-//! OUT/multi-target.json; each run's score is kept in OUT/multi-target-seeds/runs/ and read
-//! back instead of flown again (`--fresh` flies every run again).
+//! against its truth_targets.csv ([`crate::score`]). Writes OUT/multi-target-seeds.md
+//! and OUT/multi-target-seeds.json; each run's score is kept in
+//! OUT/multi-target-seeds/runs/ and read back instead of flown again (`--fresh` flies
+//! every run again).
 
 use super::monte_carlo::{seeded, NavModel};
 use crate::score::{input, metrics};
@@ -294,7 +295,7 @@ pub fn report(runs: &[RunScore], command: &str, wall_s: f64) -> String {
     out
 }
 
-/// Runs the plan and writes OUT/multi-target.md and .json.
+/// Runs the plan and writes OUT/multi-target-seeds.md and .json.
 pub fn evaluate(plan: &Plan, command: &str) -> Result<()> {
     let started = Instant::now();
     let bar = indicatif::ProgressBar::new(0);

@@ -103,7 +103,9 @@ pub struct Loaded {
     pub bias_errors_deg: Vec<[f64; 2]>,
     /// Which truth file described the vehicles.
     pub truth_file: &'static str,
-    /// track.csv rows at no pair of the recording (within half a frame period).
+    /// track.csv rows at no pair of the recording (within half a frame period), and
+    /// rows of a track already seen at their pair (the one nearest the pair's time is
+    /// kept).
     pub unpaired_rows: u64,
 }
 
@@ -168,6 +170,19 @@ pub fn load(recording: &Path, track: &Path, warm_up_s: f64) -> Result<Loaded> {
             Some(j) => estimates[j].push(row),
             None => unpaired_rows += 1,
         }
+    }
+    // One estimate per track and pair: the row nearest the pair's time.
+    for (k, rows) in estimates.iter_mut().enumerate() {
+        let before = rows.len();
+        rows.sort_by(|a, b| {
+            a.track_id.cmp(&b.track_id).then(
+                (a.t_s - times[k])
+                    .abs()
+                    .total_cmp(&(b.t_s - times[k]).abs()),
+            )
+        });
+        rows.dedup_by_key(|r| r.track_id);
+        unpaired_rows += (before - rows.len()) as u64;
     }
     let Some(first) = estimates.iter().position(|e| !e.is_empty()) else {
         bail!(

@@ -413,8 +413,8 @@ fn id_scores(within: &BTreeMap<(u32, u32), u64>, truth_total: u64, est_total: u6
         .enumerate()
         .filter_map(|(r, c)| c.map(|c| weight[r][c]))
         .sum();
-    let idfn = truth_total - idtp;
-    let idfp = est_total - idtp;
+    let idfn = truth_total.saturating_sub(idtp);
+    let idfp = est_total.saturating_sub(idtp);
     let idf1 = if truth_total + est_total == 0 {
         0.0
     } else {

@@ -110,7 +110,10 @@ pub fn table(r: &ScoreReport) -> String {
         r.truth_file,
         s.dont_care_estimates,
         if r.unpaired_track_rows > 0 {
-            format!(", {} track rows at no pair", r.unpaired_track_rows)
+            format!(
+                ", {} track rows at no pair or repeating a track at theirs",
+                r.unpaired_track_rows
+            )
         } else {
             String::new()
         }

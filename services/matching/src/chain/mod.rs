@@ -81,7 +81,8 @@ pub struct PastMatch {
     /// p_n: the current target position's pixel in that past image.
     pub pixel: [f64; 2],
     pub inliers: [usize; 2],
-    /// F_Ln and F_Rn (x_pastᵀ F x_current = 0), for diagnostics.
+    /// F_Ln and F_Rn (x_pastᵀ F x_current = 0): diagnostics, and the transfer of the
+    /// other vehicles of the pair into this image (`others.rs`).
     pub fundamental: [nalgebra::Matrix3<f64>; 2],
     /// Which model gave each F (`ground_plane` method only).
     pub models: [Option<PlaneModel>; 2],

@@ -264,6 +264,7 @@ fn checkpoint_seeds(dir: &Path) {
         last_pair_seq: 5,
         last_t_s: 10.5,
         filter: Some(temporal.snapshot()),
+        tracks: Some(tracks_snapshot()),
     };
     let filter = checkpoint::encode(CHECKPOINT_KIND, &resume).expect("encode");
     // Keyframes as matching admits them: run the frames target's pairs through an intake.
@@ -365,4 +366,20 @@ fn main() {
     checkpoint_seeds(dir);
     flight_seeds(dir);
     println!("seed corpus written to {}", dir.display());
+}
+
+/// Two vehicles' tracks, confirmed, as the geolocation service checkpoints them.
+fn tracks_snapshot() -> geolocation::tracks::TracksSnapshot {
+    use geolocation::shared_bias::OtherFix;
+    let mut tracks = geolocation::tracks::Tracks::new(Default::default()).expect("tracks");
+    let fix = |x: f64| OtherFix {
+        position: nalgebra::Point3::new(x, 5.0, 13.5),
+        covariance_xy: nalgebra::Matrix2::identity() * 0.25,
+        covariance_xy_given_biases: nalgebra::Matrix2::identity() * 0.25,
+        altitude_std_error_m: 0.5,
+    };
+    for k in 0..5 {
+        tracks.update(k as f64 / 30.0, &[fix(0.0), fix(20.0)], None);
+    }
+    tracks.snapshot()
 }
