@@ -113,14 +113,7 @@ fn fly(plan: &Plan, presets: &Presets, scene: &str, seed: u64) -> Result<RunScor
             plan.warm_up_s
         );
     }
-    let n = loaded.bias_errors_deg.len();
-    let yaw_bias_mae_deg = (n > 0).then(|| {
-        let sum = loaded
-            .bias_errors_deg
-            .iter()
-            .fold([0.0, 0.0], |a, e| [a[0] + e[0], a[1] + e[1]]);
-        sum.map(|s| s / n as f64)
-    });
+    let yaw_bias_mae_deg = loaded.yaw_bias_mae_deg();
     Ok(RunScore {
         format: RUN_FORMAT,
         scene: scene.to_string(),

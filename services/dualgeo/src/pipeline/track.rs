@@ -64,6 +64,18 @@ pub fn one_sigma(e: &EstimateMsg) -> Option<(f64, f64)> {
     (h.is_finite() && v.is_finite()).then_some((h, v))
 }
 
+/// The lat_deg, lon_deg, alt_m cells of position `p` (empty without an origin).
+fn geodetic_cells(origin: Option<&Origin>, p: &[f64; 3]) -> [String; 3] {
+    match origin.map(|o| geodetic(o, p)) {
+        Some((lat, lon, alt)) => [
+            format!("{lat:.8}"),
+            format!("{lon:.8}"),
+            format!("{alt:.3}"),
+        ],
+        None => Default::default(),
+    }
+}
+
 pub struct TrackWriter {
     path: PathBuf,
     w: csv::Writer<File>,
@@ -102,11 +114,7 @@ impl TrackWriter {
     }
 
     fn push_target(&mut self, e: &EstimateMsg) -> Result<()> {
-        let geo = self.origin.as_ref().map(|o| geodetic(o, &e.position));
-        let g = |f: fn(&(f64, f64, f64)) -> f64, digits: usize| {
-            geo.as_ref()
-                .map_or(String::new(), |v| format!("{:.*}", digits, f(v)))
-        };
+        let [lat, lon, alt] = geodetic_cells(self.origin.as_ref(), &e.position);
         let sigma = one_sigma(e);
         self.w
             .write_record([
@@ -115,9 +123,9 @@ impl TrackWriter {
                 format!("{:.3}", e.position[0]),
                 format!("{:.3}", e.position[1]),
                 format!("{:.3}", e.position[2]),
-                g(|v| v.0, 8),
-                g(|v| v.1, 8),
-                g(|v| v.2, 3),
+                lat,
+                lon,
+                alt,
                 format!("{:.3}", e.yaw_bias_deg[0]),
                 format!("{:.3}", e.yaw_bias_deg[1]),
                 e.images_used.to_string(),
@@ -145,11 +153,7 @@ impl TrackWriter {
             }
         };
         for t in e.tracks() {
-            let geo = self.origin.as_ref().map(|o| geodetic(o, &t.position));
-            let g = |f: fn(&(f64, f64, f64)) -> f64, digits: usize| {
-                geo.as_ref()
-                    .map_or(String::new(), |v| format!("{:.*}", digits, f(v)))
-            };
+            let [lat, lon, alt] = geodetic_cells(self.origin.as_ref(), &t.position);
             let h = (t.covariance_xy[0] + t.covariance_xy[3]).max(0.0).sqrt();
             self.w
                 .write_record([
@@ -158,9 +162,9 @@ impl TrackWriter {
                     format!("{:.3}", t.position[0]),
                     format!("{:.3}", t.position[1]),
                     format!("{:.3}", t.position[2]),
-                    g(|v| v.0, 8),
-                    g(|v| v.1, 8),
-                    g(|v| v.2, 3),
+                    lat,
+                    lon,
+                    alt,
                     bias(0),
                     bias(1),
                     "0".to_string(),

@@ -109,6 +109,20 @@ pub struct Loaded {
     pub unpaired_rows: u64,
 }
 
+impl Loaded {
+    /// The mean of [`Loaded::bias_errors_deg`], left and right; `None` without any.
+    pub fn yaw_bias_mae_deg(&self) -> Option<[f64; 2]> {
+        let n = self.bias_errors_deg.len();
+        (n > 0).then(|| {
+            let sum = self
+                .bias_errors_deg
+                .iter()
+                .fold([0.0, 0.0], |a, e| [a[0] + e[0], a[1] + e[1]]);
+            sum.map(|s| s / n as f64)
+        })
+    }
+}
+
 fn wrap_deg(d: f64) -> f64 {
     (d + 180.0).rem_euclid(360.0) - 180.0
 }

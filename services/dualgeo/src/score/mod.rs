@@ -75,14 +75,7 @@ pub fn run(args: &ScoreArgs) -> Result<()> {
     };
     let loaded = input::load(&args.recording, &track, args.warm_up_s)?;
     let score = metrics::score(&loaded.frames, params);
-    let n = loaded.bias_errors_deg.len();
-    let yaw_bias_mae_deg = (n > 0).then(|| {
-        let sum = loaded
-            .bias_errors_deg
-            .iter()
-            .fold([0.0, 0.0], |a, e| [a[0] + e[0], a[1] + e[1]]);
-        sum.map(|s| s / n as f64)
-    });
+    let yaw_bias_mae_deg = loaded.yaw_bias_mae_deg();
     let report = ScoreReport {
         recording: args.recording.clone(),
         track,
