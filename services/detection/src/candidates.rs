@@ -20,18 +20,22 @@ pub fn centre_colour(frame: &cv::Mat, centre: [f64; 2]) -> Result<[u8; 3], Detec
     if u >= cols || v >= rows {
         return Ok([0; 3]);
     }
-    let mut samples: [Vec<u8>; 3] = Default::default();
+    // At most 3 × 3 pixels: fixed arrays, no allocation per candidate and frame.
+    let mut samples = [[0u8; 9]; 3];
+    let mut n = 0;
     for y in (v - 1).max(0)..=(v + 1).min(rows - 1) {
         for x in (u - 1).max(0)..=(u + 1).min(cols - 1) {
             let p = frame.at_2d::<cv::Vec3b>(y, x)?;
             for c in 0..3 {
-                samples[c].push(p[c]);
+                samples[c][n] = p[c];
             }
+            n += 1;
         }
     }
     Ok(samples.map(|mut s| {
+        let s = &mut s[..n];
         s.sort_unstable();
-        s[s.len() / 2]
+        s[n / 2]
     }))
 }
 
