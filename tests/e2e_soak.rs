@@ -19,7 +19,9 @@ fn a_sixty_second_soak_reports_flat_memory_and_streams_its_outputs() {
     let rec = dir.0.join("rec");
     let out = dir.0.join("out");
     let dualgeo = std::path::Path::new(env!("CARGO_BIN_EXE_dualgeo"));
-    chaos::simulate_default(dualgeo, 4, &rec).unwrap();
+    // Each pass starts over with a few seconds of warm-up: 10 s passes keep estimates
+    // flowing for most of the run.
+    chaos::simulate_default(dualgeo, 10, &rec).unwrap();
     let run = Command::new(env!("CARGO_BIN_EXE_dualgeo"))
         .args([
             "run",

@@ -82,7 +82,7 @@ impl PoseSample {
 /// User header of a frame sample; the payload is `stride × height` bytes of pixels.
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
 #[repr(C)]
-#[type_name("dualgeo::FrameHeader/v3")]
+#[type_name("dualgeo::FrameHeader/v4")]
 pub struct FrameHeader {
     /// Per-UAV frame index (the pair index: left and right frames of one instant share it).
     pub seq: u64,
@@ -101,7 +101,12 @@ pub struct FrameHeader {
     pub height: u32,
     /// Bytes per row.
     pub stride: u32,
-    pub _reserved2: u32,
+    /// The stream's segment: 0 at the start, one more wherever the stream jumps
+    /// (a looped recording starting over). What assumes a continuous world (the
+    /// image tracks, the keyframe rings, the filter, the other vehicles' tracks)
+    /// starts over with a new segment, as for a new stream; the clock (`t_s`) and
+    /// the sequence numbers go on.
+    pub segment: u32,
     /// Measured pose at capture.
     pub pose: PoseSample,
     /// Pinhole intrinsics of this camera: fx, fy, cx, cy (pixels).
@@ -247,7 +252,7 @@ impl OtherTarget {
 /// `entries[1]` the current right one, then `count − 2` past images.
 #[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
 #[repr(C)]
-#[type_name("dualgeo::ObservationSetMsg/v5")]
+#[type_name("dualgeo::ObservationSetMsg/v6")]
 pub struct ObservationSetMsg {
     /// Index of this set among the sets matching published (gaps = sets lost).
     pub set_seq: u64,
@@ -258,6 +263,9 @@ pub struct ObservationSetMsg {
     pub count: u32,
     /// Past images that gave no corresponding point.
     pub rejected_past: u32,
+    /// The stream segment of the pair ([`FrameHeader::segment`]).
+    pub segment: u32,
+    pub _reserved: u32,
     pub entries: [ObservationEntry; MAX_OBSERVATIONS],
     /// Valid entries of `others`.
     pub other_count: u32,
@@ -277,6 +285,8 @@ impl Default for ObservationSetMsg {
             t_s: 0.0,
             count: 0,
             rejected_past: 0,
+            segment: 0,
+            _reserved: 0,
             entries: [ObservationEntry::default(); MAX_OBSERVATIONS],
             other_count: 0,
             others_dropped: 0,
@@ -444,7 +454,7 @@ mod tests {
         assert_eq!(std::mem::size_of::<OtherTarget>(), 32 + 16 * 30 + 16);
         assert_eq!(
             std::mem::size_of::<ObservationSetMsg>(),
-            48 + 120 * MAX_OBSERVATIONS + 8 + 528 * MAX_OTHER_TARGETS
+            56 + 120 * MAX_OBSERVATIONS + 8 + 528 * MAX_OTHER_TARGETS
         );
         let set = ObservationSetMsg {
             count: 99,

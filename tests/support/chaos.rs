@@ -100,6 +100,95 @@ pub fn simulate_default(dualgeo: &Path, seconds: u32, out: &Path) -> Result<(), 
     }
 }
 
+/// Where a looped run stands in its recording, from what its `track.csv` has on disk
+/// (flushed every 0.5 s). Each pass of a looped recording is a stream segment that
+/// starts over, with the warm-up of a run's start (seconds without estimates): a kill
+/// landing in it, or just before the end of a pass, would measure that warm-up and not
+/// the restart. Kills are sent only while the current pass's estimates have flowed for
+/// [`LapGuard::SETTLED`] pairs and its end is [`LapGuard::BEFORE_END`] pairs away. The
+/// warm-up is read from the run itself (the first estimate's place in its pass).
+pub struct LapGuard {
+    track: std::path::PathBuf,
+    /// Pairs in one pass of the recording, and its frame rate (infinite and 30 for a
+    /// source that does not loop: only the warm-up is waited for).
+    pairs_per_lap: f64,
+    rate_hz: f64,
+}
+
+impl LapGuard {
+    pub const SETTLED: f64 = 15.0;
+    pub const BEFORE_END: f64 = 60.0;
+
+    /// For a run writing to `out` from the recording `rec` (its `left/` images and
+    /// `frame_rate_hz`; its clock starts at 0).
+    pub fn new(out: &Path, rec: &Path) -> std::io::Result<Self> {
+        let toml = std::fs::read_to_string(rec.join("recording.toml"))?;
+        let rate_hz = toml
+            .lines()
+            .find_map(|l| {
+                l.strip_prefix("frame_rate_hz")?
+                    .trim_start()
+                    .strip_prefix('=')
+            })
+            .and_then(|v| v.trim().parse::<f64>().ok())
+            .ok_or_else(|| std::io::Error::other("recording.toml has no frame_rate_hz"))?;
+        Ok(Self {
+            track: out.join("track.csv"),
+            pairs_per_lap: std::fs::read_dir(rec.join("left"))?.count().max(1) as f64,
+            rate_hz,
+        })
+    }
+
+    /// For a run from a source that never starts over (the live simulator).
+    pub fn unlooped(out: &Path) -> Self {
+        Self {
+            track: out.join("track.csv"),
+            pairs_per_lap: f64::INFINITY,
+            rate_hz: 30.0,
+        }
+    }
+
+    /// The place in its pass (pairs) of the first and of the newest target estimate
+    /// on disk. The stream's clock goes on across passes; pair numbers would drift
+    /// with pairs skipped under load.
+    fn places(&self) -> Option<(f64, f64)> {
+        let text = std::fs::read_to_string(&self.track).ok()?;
+        let lap_s = self.pairs_per_lap / self.rate_hz;
+        let mut places = text.lines().skip(1).filter_map(|l| {
+            let f: Vec<&str> = l.split(',').collect();
+            let t = f.first()?.parse::<f64>().ok()?;
+            f.get(15).is_none_or(|id| *id == "0").then(|| {
+                if lap_s.is_finite() {
+                    t.rem_euclid(lap_s) * self.rate_hz
+                } else {
+                    t * self.rate_hz
+                }
+            })
+        });
+        let first = places.next()?;
+        Some((first, places.last().unwrap_or(first)))
+    }
+
+    /// Whether a kill now lands in the middle of a pass, estimates flowing.
+    pub fn mid_lap(&self) -> bool {
+        self.places().is_some_and(|(first, newest)| {
+            newest >= first + Self::SETTLED && newest + Self::BEFORE_END <= self.pairs_per_lap
+        })
+    }
+
+    /// Waits until [`Self::mid_lap`]; false after `timeout`.
+    pub fn wait(&self, timeout: Duration) -> bool {
+        let deadline = Instant::now() + timeout;
+        while Instant::now() < deadline {
+            if self.mid_lap() {
+                return true;
+            }
+            std::thread::sleep(Duration::from_millis(50));
+        }
+        false
+    }
+}
+
 /// One SIGKILL sent.
 #[derive(Debug, Clone)]
 pub struct Kill {
@@ -115,6 +204,7 @@ pub fn kill_services(
     count: usize,
     rng: &mut Rng,
     gap_s: (f64, f64),
+    guard: &LapGuard,
     schedule: impl Fn(usize, &mut Rng) -> &'static str,
     mut progress: impl FnMut(usize),
 ) -> Vec<Kill> {
@@ -124,6 +214,9 @@ pub fn kill_services(
             break;
         }
         std::thread::sleep(Duration::from_secs_f64(rng.uniform(gap_s.0, gap_s.1)));
+        if !guard.wait(Duration::from_secs(40)) {
+            break;
+        }
         let service = schedule(i, rng);
         let Some(pid) = service_pid(parent, service) else {
             break;

@@ -1,6 +1,8 @@
 //! Issue #13's recovery figure: one looped run of a recording in which services are
 //! killed (SIGKILL) `--kills` times at random moments (fixed seed; services chosen at
-//! random), each 1–2.5 s after every service runs again. Prints, per service and over
+//! random), each 1–2.5 s after every service runs again and only while estimates flow
+//! in the middle of a pass (`LapGuard`: every pass of a looped recording starts over
+//! with a warm-up that a kill landing there would measure). Prints, per service and over
 //! all kills, the percentiles of kill → estimates resumed (the first valid estimate
 //! of a pair captured after the death; `restarts.csv` of `dualgeo run`), the pairs
 //! lost, and whether any estimate was out of order or non-finite.
@@ -15,7 +17,7 @@
 mod chaos;
 
 use anyhow::{bail, Result};
-use chaos::{kill_services, quantile, read_restarts, recoveries, Rng, SERVICES};
+use chaos::{kill_services, quantile, read_restarts, recoveries, LapGuard, Rng, SERVICES};
 use clap::Parser;
 use std::path::PathBuf;
 use std::process::{Command, Stdio};
@@ -25,7 +27,7 @@ struct Args {
     /// SIGKILLs to send.
     #[arg(long, default_value_t = 100)]
     kills: usize,
-    /// `recording` (a 6 s recording of the default scenario, simulated first) or `sim`
+    /// `recording` (a 16 s recording of the default scenario, simulated first) or `sim`
     /// (the live simulator, whose restart builds the town again).
     #[arg(long, default_value = "recording")]
     source: String,
@@ -49,17 +51,18 @@ fn main() -> Result<()> {
     });
     std::fs::create_dir_all(&scratch)?;
     let out = scratch.join("out");
-    let source = match args.source.as_str() {
-        "sim" => "sim".to_string(),
+    let (source, guard) = match args.source.as_str() {
+        "sim" => ("sim".to_string(), LapGuard::unlooped(&out)),
         "recording" => {
             let rec = scratch.join("rec");
-            chaos::simulate_default(&dualgeo()?, 6, &rec).map_err(anyhow::Error::msg)?;
-            rec.display().to_string()
+            chaos::simulate_default(&dualgeo()?, 16, &rec).map_err(anyhow::Error::msg)?;
+            (rec.display().to_string(), LapGuard::new(&out, &rec)?)
         }
         other => bail!("--source must be recording or sim, got {other:?}"),
     };
-    // ~2.6 s per kill (gap + recovery), plus warm-up and the end.
-    let run_for = 10.0 + args.kills as f64 * 3.2;
+    // ~2.6 s per kill (gap + recovery), ~40 % of each 16 s pass outside the guard's
+    // window, plus warm-up and the end.
+    let run_for = 10.0 + args.kills as f64 * 5.0;
     let mut run = Command::new(dualgeo()?)
         .args([
             "run",
@@ -74,13 +77,13 @@ fn main() -> Result<()> {
         .stdout(Stdio::piped())
         .stderr(Stdio::null())
         .spawn()?;
-    std::thread::sleep(std::time::Duration::from_secs(4));
     let mut rng = Rng::new(args.seed);
     let kills = kill_services(
         run.id(),
         args.kills,
         &mut rng,
         (1.0, 2.5),
+        &guard,
         |_, rng| SERVICES[(rng.next_u64() % 4) as usize],
         |n| {
             if n % 10 == 0 {

@@ -77,6 +77,10 @@ struct Args {
     /// Start again at the end (soak runs); stops on SIGINT/SIGTERM.
     #[arg(long = "loop")]
     looping: bool,
+    /// Stream the source this many times, then end (a `--loop` that stops; each pass
+    /// is a stream segment of its own).
+    #[arg(long, value_parser = clap::value_parser!(u64).range(1..))]
+    laps: Option<u64>,
     /// Simulator: write what was streamed (telemetry.csv, truth.csv) here.
     #[arg(long)]
     log_dir: Option<PathBuf>,
@@ -361,7 +365,8 @@ fn run() -> Result<()> {
         let produce_start = monotonic_ns();
         let info = match source.next_pair(left.payload_mut(), right.payload_mut(), stride) {
             None => {
-                if args.looping {
+                let again = args.looping || args.laps.is_some();
+                if again && args.laps.is_none_or(|n| position.loops + 1 < n) {
                     source.rewind()?;
                     t_offset += last_t + source.period_s() - t_first.unwrap_or(0.0);
                     t_first = None;
@@ -473,6 +478,9 @@ fn run() -> Result<()> {
                 pose: info.poses[uav.index()],
                 intrinsics: intrinsics[uav.index()],
                 distortion: distortion[uav.index()],
+                // Each lap of a looped recording is a segment of its own: the world
+                // jumps back to the recording's start.
+                segment: u32::try_from(position.loops).unwrap_or(u32::MAX),
                 ..Default::default()
             };
         }

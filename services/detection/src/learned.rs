@@ -75,6 +75,17 @@ pub struct LearnedDetector {
 }
 
 impl LearnedDetector {
+    /// Forgets `camera`'s template track and any model answer waiting for it: its
+    /// stream jumped (a new segment). The next frame runs the model.
+    pub fn start_over(&mut self, camera: usize) {
+        if camera > 1 {
+            return;
+        }
+        self.tracks[camera].drop_track();
+        self.pending[camera] = None;
+        self.since_run[camera] = u32::MAX;
+    }
+
     /// Loads the model (for the worker thread); `synchronous`: wait for each model
     /// run on the frame that started it.
     pub fn new(config: YoloConfig, synchronous: bool) -> Result<Self, DetectError> {

@@ -16,7 +16,9 @@
 //! (detections after a camera found nothing in its gates for `reacquire_after_s`),
 //! `gated_frames` (frames detected with a gate), `frames_late` (started after the
 //! frame's deadline, one frame period after its moment: `shared_types::deadline`) and
-//! `frames_shed` (late with a newer frame of the same UAV waiting: skipped, no message).
+//! `frames_shed` (late with a newer frame of the same UAV waiting: skipped, no message),
+//! `segments` (the stream jumped, a looped recording starting over: every camera's
+//! tracks and the filter's predictions were forgotten).
 //! With `[detection] kind = "yolo"` (`detection::learned`): `model_runs`,
 //! `model_found`, `tracked`, `track_lost`, and the histogram `model` (µs per model run,
 //! on its own thread). With `kind = "motion"` (`detection::motion`): `movers` (blobs
@@ -85,6 +87,7 @@ fn run() -> Result<()> {
         candidates,
         found_all: Vec::new(),
         predictions: RecentPredictions::default(),
+        segments: [None; 2],
         gate_config,
         stats: StageStats::new("detection"),
         trace: args.service.tracer("detection"),
@@ -148,6 +151,15 @@ enum Chosen {
 }
 
 impl Chosen {
+    /// `camera`'s stream jumped (a new segment): its tracks start over.
+    fn start_over(&mut self, camera: usize) {
+        match self {
+            Chosen::Colour(d) => d.start_over(camera),
+            Chosen::Learned(d) => d.start_over(camera),
+            Chosen::Motion(d) => d.start_over(camera),
+        }
+    }
+
     fn new(config: DetectionConfig, flow_controlled: bool) -> Result<Self, detection::DetectError> {
         Ok(match (config.kind, config.yolo) {
             (DetectorKind::Yolo, Some(yolo)) => {
@@ -169,6 +181,8 @@ struct Detecting {
     /// Everything the detector found in the frame (reused).
     found_all: Vec<detection::Detection>,
     predictions: RecentPredictions,
+    /// Per camera: the stream segment of its last frame.
+    segments: [Option<u32>; 2],
     gate_config: detection::prediction_gate::GateConfig,
     stats: StageStats,
     trace: shared_types::trace::Tracer,
@@ -204,6 +218,15 @@ impl Detecting {
             Verdict::Late => self.stats.count("frames_late", 1),
             Verdict::OnTime => {}
         }
+        // The stream jumped (a looped recording started over): this camera's tracks
+        // and the filter's predictions speak of a world that is gone.
+        if self.segments[uav].is_some_and(|s| s != header.segment) {
+            self.detector.start_over(uav);
+            if self.predictions.start_segment(header.seq) {
+                self.stats.count("segments", 1);
+            }
+        }
+        self.segments[uav] = Some(header.segment);
         let stats = &mut self.stats;
         let mat = frame_mat(&header, payload);
         let detected = mat.as_ref().map(|mat| match &mut self.detector {

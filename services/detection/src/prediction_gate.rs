@@ -246,18 +246,37 @@ pub struct RecentPredictions {
     items: std::collections::VecDeque<(u64, Option<TargetPrediction>)>,
     /// The newest trusted prediction that has left `items`.
     evicted: Option<(u64, TargetPrediction)>,
+    /// The first pair of the stream's current segment: estimates of earlier pairs
+    /// speak of a world that is gone.
+    floor: u64,
 }
 
 impl RecentPredictions {
     /// Remembers what the estimate of `pair_seq` says (`None`: nothing to gate with,
     /// e.g. the filter was converging).
     pub fn push(&mut self, pair_seq: u64, prediction: Option<TargetPrediction>) {
+        if pair_seq < self.floor {
+            return;
+        }
         if self.items.len() == 8 {
             if let Some((s, Some(p))) = self.items.pop_front() {
                 self.evicted = Some((s, p));
             }
         }
         self.items.push_back((pair_seq, prediction));
+    }
+
+    /// The stream jumped at pair `first_seq` (a new segment, e.g. a looped recording
+    /// starting over): every prediction so far, and every later estimate of an
+    /// earlier pair, is forgotten. The filter starts over too, and gates again once it
+    /// has an estimate of the new segment.
+    /// True when this moved the start (the first camera to see the new segment).
+    pub fn start_segment(&mut self, first_seq: u64) -> bool {
+        self.items.clear();
+        self.evicted = None;
+        let moved = first_seq > self.floor;
+        self.floor = self.floor.max(first_seq);
+        moved
     }
 
     /// The prediction that gates the frames of pair `seq`: the newest trusted one at
@@ -386,6 +405,27 @@ mod tests {
             quiet.push(seq, None);
         }
         assert_eq!(quiet.for_pair(30).map(|p| p.t_s), Some(10.0));
+    }
+
+    #[test]
+    fn a_new_segment_forgets_every_prediction_and_late_estimates_of_the_old_one() {
+        let mut r = RecentPredictions::default();
+        for seq in 0..10 {
+            r.push(seq, Some(prediction(seq as f64, 0.0)));
+        }
+        assert!(r.for_pair(12).is_some());
+        assert!(r.start_segment(12));
+        assert!(r.for_pair(12).is_none(), "the old world gates nothing");
+        // An estimate of an old pair arriving after the jump is dropped...
+        r.push(11, Some(prediction(11.0, 0.0)));
+        assert!(r.for_pair(20).is_none());
+        // ... one of the new segment gates again.
+        r.push(14, Some(prediction(14.0, 0.0)));
+        assert_eq!(r.for_pair(16).map(|p| p.position[0]), Some(14.0));
+        // A segment's start never moves the floor back.
+        assert!(!r.start_segment(3));
+        r.push(5, Some(prediction(5.0, 0.0)));
+        assert!(r.for_pair(20).is_none());
     }
 
     #[test]

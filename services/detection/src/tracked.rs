@@ -34,6 +34,8 @@ pub struct TrackCounts {
 pub struct TrackedDetector {
     detector: ColourBlobDetector,
     guards: [PartialViewGuard; 2],
+    /// A guard that has seen nothing (what [`Self::start_over`] puts back).
+    fresh_guard: PartialViewGuard,
     gate_config: GateConfig,
     /// Per camera: when it last found the target (inside its gate, if it had one).
     last_found: [Option<f64>; 2],
@@ -65,10 +67,24 @@ impl TrackedDetector {
             whole_frame_every: config.whole_frame_every,
             detector: ColourBlobDetector::new(config)?,
             guards: [guard; 2],
+            fresh_guard: guard,
             counts: TrackCounts::default(),
             retries_seen: 0,
             windows_seen: (0, 0),
         })
+    }
+
+    /// Forgets what `camera` saw (its image track, landmarks and look-alikes): its
+    /// stream jumped (a new segment), so nothing it saw says where to look now.
+    pub fn start_over(&mut self, camera: usize) {
+        if camera > 1 {
+            return;
+        }
+        self.guards[camera] = self.fresh_guard;
+        self.last_found[camera] = None;
+        self.landmarks[camera].clear();
+        self.look_alike_seen[camera] = None;
+        self.since_whole[camera] = 0;
     }
 
     /// The target in `camera`'s (0 = left, 1 = right) frame taken at `t_s`, if it is

@@ -15,7 +15,10 @@
 //! file), and `end_to_end` (frame capture → estimate published). Counters: `sets`,
 //! `estimates`, `sets_lost`, `bad_input`, `rejected.<reason>`, `resumed`,
 //! `checkpoint_refused`, `checkpoint_failed`, `stale_sets`, `estimates_late` (published
-//! more than a frame period after the pair's moment; `shared_types::deadline`).
+//! more than a frame period after the pair's moment; `shared_types::deadline`),
+//! `segments` (the stream jumped, a looped recording starting over: the filter and the
+//! tracks started over, as for a new stream; a set of an earlier segment is
+//! `stale_sets`).
 //!
 //! Several targets (`[tracks]`, on by default): the set's other vehicles are located
 //! with the target's yaw biases and tracked (`geolocation::others_message`, its
@@ -25,7 +28,9 @@
 use anyhow::{Context, Result};
 use clap::Parser;
 use geolocation::others_message::add_tracks;
-use geolocation::set_message::{estimate_message, is_stale, Resume, CHECKPOINT_KIND};
+use geolocation::set_message::{
+    estimate_message, is_stale, segment_step, Resume, SegmentStep, CHECKPOINT_KIND,
+};
 use geolocation::tracks::{TrackConfig, Tracks};
 use geolocation::{EstimatorConfig, EstimatorMethod, TemporalEstimator};
 use shared_types::checkpoint;
@@ -55,7 +60,7 @@ fn resume(
     tracks: &mut Tracks,
     track_config: TrackConfig,
     stats: &mut StageStats,
-) -> Option<(u64, f64)> {
+) -> Option<(u64, f64, u32)> {
     let found = match checkpoint::read::<Resume>(path?, CHECKPOINT_KIND) {
         Ok(found) => found?,
         Err(e) => {
@@ -88,7 +93,7 @@ fn resume(
         t_s = found.last_t_s,
         "resumed from the checkpoint"
     );
-    Some((found.last_pair_seq, found.last_t_s))
+    Some((found.last_pair_seq, found.last_t_s, found.segment))
 }
 
 /// Exits with [`shell::EXIT_PERMANENT`] when the input or configuration was refused
@@ -148,13 +153,22 @@ fn run() -> Result<()> {
                 first = false;
             }
             let start = monotonic_ns();
-            let (set_pair, set_published) = (set.pair_seq, set.published_ns);
+            let (set_pair, set_published, set_segment) =
+                (set.pair_seq, set.published_ns, set.segment);
             stats.record("wait", elapsed_us(set.published_ns, start));
             stats.count("sets", 1);
             stats.count("sets_lost", gaps.see(set.set_seq));
-            if is_stale(set.t_s, last.map(|(_, t)| t)) {
+            let step = segment_step(set.segment, last.map(|(_, _, s)| s));
+            if step == SegmentStep::Old || is_stale(set.t_s, last.map(|(_, t, _)| t)) {
                 stats.count("stale_sets", 1);
                 continue;
+            }
+            if step == SegmentStep::New {
+                if let Some(t) = temporal.as_mut() {
+                    t.reset();
+                }
+                tracks.start_over();
+                stats.count("segments", 1);
             }
             let mut msg = estimate_message(set, &config, temporal.as_mut(), &mut stats);
             if track_config.enabled {
@@ -180,11 +194,12 @@ fn run() -> Result<()> {
             );
             publisher.send_copy(msg).context("publish estimate")?;
             wake_supervisor.notify().context("wake supervisor")?;
-            last = Some((msg.pair_seq, msg.t_s));
+            last = Some((msg.pair_seq, msg.t_s, set_segment));
             if let Some(path) = &state_path {
                 let state = Resume {
                     last_pair_seq: msg.pair_seq,
                     last_t_s: msg.t_s,
+                    segment: set_segment,
                     filter: temporal.as_ref().map(TemporalEstimator::snapshot),
                     tracks: track_config.enabled.then(|| tracks.snapshot()),
                 };

@@ -23,6 +23,29 @@ pub struct Resume {
     pub filter: Option<TemporalSnapshot>,
     /// The other vehicles' tracks (`None` with `[tracks] enabled = false`).
     pub tracks: Option<crate::tracks::TracksSnapshot>,
+    /// The stream segment of the last set estimated (`FrameHeader::segment`).
+    pub segment: u32,
+}
+
+/// What a set's stream segment means against that of the last set estimated.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum SegmentStep {
+    /// The same segment (or the service's first set): go on.
+    Same,
+    /// The stream jumped (a looped recording starting over): the filter and the
+    /// tracks start over, as for a new stream. The world they hold is gone: a filter
+    /// carried over the jump coasted 64 m off for a second while stating ±2 m.
+    New,
+    /// A set of a segment already left behind: dropped (`stale_sets`).
+    Old,
+}
+
+pub fn segment_step(segment: u32, last: Option<u32>) -> SegmentStep {
+    match last {
+        Some(s) if segment > s => SegmentStep::New,
+        Some(s) if segment < s => SegmentStep::Old,
+        _ => SegmentStep::Same,
+    }
 }
 
 /// Whether a set must be dropped unseen (`stale_sets`): its time is not finite, or not
@@ -258,6 +281,27 @@ mod tests {
         let msg = estimate_message(&set_at(10.0), &strict, Some(&mut temporal), &mut stats);
         assert_eq!(msg.status, EstimateStatus::Withheld as u32);
         assert_eq!(stats.counter("withheld.h_acc"), 1);
+    }
+
+    /// A set of a later segment starts the filter over: the next set is not
+    /// estimated from the old world (the filter needs its agreeing starts again).
+    #[test]
+    fn a_new_segment_starts_the_filter_over() {
+        assert_eq!(segment_step(0, None), SegmentStep::Same);
+        assert_eq!(segment_step(3, None), SegmentStep::Same);
+        assert_eq!(segment_step(1, Some(1)), SegmentStep::Same);
+        assert_eq!(segment_step(2, Some(1)), SegmentStep::New);
+        assert_eq!(segment_step(0, Some(1)), SegmentStep::Old);
+        let config = EstimatorConfig::default();
+        let mut temporal = TemporalEstimator::new(config).unwrap();
+        let mut stats = StageStats::new("t");
+        start(&mut temporal, &config, &mut stats);
+        let msg = estimate_message(&set_at(10.0), &config, Some(&mut temporal), &mut stats);
+        assert_eq!(msg.status, EstimateStatus::Ok as u32);
+        temporal.reset();
+        let msg = estimate_message(&set_at(10.1), &config, Some(&mut temporal), &mut stats);
+        assert_eq!(msg.status, EstimateStatus::Rejected as u32);
+        assert_eq!(stats.counter("rejected.not_started"), 3);
     }
 
     #[test]

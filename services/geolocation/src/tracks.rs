@@ -219,6 +219,14 @@ impl Tracks {
         })
     }
 
+    /// The stream jumped (a new segment, a looped recording starting over): every
+    /// track is dropped, as for a new stream. Ids are never given again (a CoT or
+    /// GeoJSON client must not take a new vehicle for an old one), and the learnt
+    /// noise scale, a property of the fixes and not of the scene, is kept.
+    pub fn start_over(&mut self) {
+        self.tracks.clear();
+    }
+
     pub fn take_counts(&mut self) -> TrackCounts {
         std::mem::take(&mut self.counts)
     }
@@ -626,6 +634,26 @@ mod tests {
         let mut bad = snap;
         bad.next_id = u32::MAX;
         assert!(Tracks::restore(config, &bad).is_err());
+    }
+
+    /// A new segment drops every track; the next vehicle gets a new id.
+    #[test]
+    fn a_new_segment_drops_the_tracks_and_never_gives_an_id_again() {
+        let mut tracks = Tracks::new(TrackConfig::default()).unwrap();
+        let mut out = Vec::new();
+        for k in 0..10 {
+            out = tracks.update(k as f64 * DT, &[fix(0.0, 0.0), fix(9.0, 0.0)], None);
+        }
+        assert_eq!(out.iter().map(|r| r.id).collect::<Vec<_>>(), vec![1, 2]);
+        tracks.start_over();
+        assert!(
+            tracks.update(10.0 * DT, &[], None).is_empty(),
+            "nothing coasts on"
+        );
+        for k in 11..20 {
+            out = tracks.update(k as f64 * DT, &[fix(0.0, 0.0)], None);
+        }
+        assert_eq!(out.iter().map(|r| r.id).collect::<Vec<_>>(), vec![3]);
     }
 
     #[test]

@@ -201,6 +201,21 @@ impl FrameTracker {
         })
     }
 
+    /// The stream jumped (a new segment): the frames kept and the points followed are
+    /// dropped and the counters start again, as for a new stream; the buffers stay
+    /// for the next frames (rebuilding them every pass grew the service).
+    pub fn start_over(&mut self) {
+        while let Some(old) = self.kept.pop_front() {
+            if self.spare_pyramids.len() < 2 {
+                self.spare_pyramids.push(old.pyramid);
+            }
+        }
+        self.followed.points.clear();
+        self.followed.ids.clear();
+        self.epoch = 0;
+        self.step = 0;
+    }
+
     /// Whether frames are tracked (else every frame runs ORB here).
     pub fn enabled(&self) -> bool {
         self.enabled

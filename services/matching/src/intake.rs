@@ -161,6 +161,16 @@ impl Intake {
     pub fn extract(&mut self, views: [Option<FrameView>; 2]) {
         let start = monotonic_ns();
         let [left, right] = views;
+        // The stream jumped (a looped recording started over): the chain starts over
+        // before the new segment's first frame is tracked.
+        let newest_segment = [&left, &right]
+            .into_iter()
+            .flatten()
+            .map(|(h, _)| h.segment)
+            .max();
+        if let Some(segment) = newest_segment.filter(|s| *s > self.chain.segment()) {
+            self.start_segment(segment);
+        }
         // A refresh due on these frames lands first (and may wait for its thread at
         // `--rate max`: counted in `refresh_wait`).
         for (uav, view) in [(Uav::Left, &left), (Uav::Right, &right)] {
@@ -241,6 +251,21 @@ impl Intake {
         self.record_landings();
     }
 
+    /// Starts the chain over for stream segment `segment` (counted `segments`); the
+    /// emptied rings are checkpointed, so a restart does not bring the old ones back.
+    fn start_segment(&mut self, segment: u32) {
+        match self.chain.start_over(segment) {
+            Ok(()) => {
+                self.stats.count("segments", 1);
+                self.unsaved = [true; 2];
+            }
+            Err(e) => {
+                tracing::warn!(segment, "the chain did not start over: {e}");
+                self.stats.count("match_failed", 1);
+            }
+        }
+    }
+
     /// The refreshes that landed: `refresh` (the thread's work, µs), `refresh_late`
     /// (frames from the one it was taken on to the one it landed on), `refresh_wait`
     /// (a pair waiting for it at `--rate max`), and the trace's refresh lane.
@@ -315,8 +340,14 @@ impl Intake {
         let (Some(dl), Some(dr)) = (pair.detections[0], pair.detections[1]) else {
             return None;
         };
-        self.stats.count("pairs", 1);
         self.acks += 1;
+        // A pair of the segment before the jump, completed late: the chain has started
+        // over, and its frames must not enter the new rings.
+        if hl.segment < self.chain.segment() {
+            self.stats.count("pairs_abandoned", 1);
+            return None;
+        }
+        self.stats.count("pairs", 1);
         let start = monotonic_ns();
         // Only the newest complete pair is ever matched (older ones were abandoned
         // above), so a late pair has nothing newer to yield to: matched, counted.
@@ -390,6 +421,7 @@ impl Intake {
                     capture_ns: hl.capture_ns.min(hr.capture_ns),
                     t_s: hl.t_s,
                     rejected_past: rejections.len() as u32,
+                    segment: hl.segment,
                     ..Default::default()
                 };
                 self.put_others([&ml, &mr], &m, &mut msg);

@@ -34,7 +34,10 @@
 //! [`matching::ChainCounts`]: `retried_looser_ratio`, `retry_rescued`,
 //! `fast_threshold_lowered`, `keypoints_outside_lens`, `detections_outside_lens`,
 //! `rectified_frames` (ORB on a tilted camera's straight-down view, `matching::rectify`);
-//! `keyframes_restored`, `checkpoint_refused`, `checkpoint_failed`; `bad_frames`,
+//! `keyframes_restored`, `checkpoint_refused`, `checkpoint_failed`; `segments` (the
+//! stream jumped, a looped recording starting over: trackers, rings and refreshes
+//! started over; a pair of the old segment completed later is `pairs_abandoned`);
+//! `bad_frames`,
 //! `bad_detections` and `match_failed` (untrusted input dropped: a pair is lost, the
 //! service goes on). The pairing and matching logic is [`matching::intake`]; this
 //! file only moves samples.

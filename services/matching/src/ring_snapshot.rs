@@ -40,6 +40,9 @@ pub struct RingIndex {
     pub keyframes: [Vec<u64>; 2],
     /// Per UAV: (t, smoothed position).
     pub smoothed: [Option<(f64, [f64; 3])>; 2],
+    /// The stream segment they are of (`FrameHeader::segment`): a restarted service
+    /// whose first frame is of a later segment starts over.
+    pub segment: u32,
 }
 
 impl KeyframeSnapshot {
@@ -141,6 +144,7 @@ impl VisionChain {
             keyframes: [Uav::Left, Uav::Right]
                 .map(|u| self.rings[u.index()].iter().map(|kf| kf.seq).collect()),
             smoothed: self.smoothed.map(|s| s.map(|(t, p)| (t, p.coords.into()))),
+            segment: self.segment,
         }
     }
 
@@ -170,6 +174,7 @@ impl VisionChain {
                 }
             }
         }
+        self.segment = index.segment;
         Ok(restored)
     }
 }
@@ -225,6 +230,7 @@ pub(crate) mod tests {
         let index = RingIndex {
             keyframes: [vec![], vec![3, 9]],
             smoothed: [None, Some((0.3, [1.0, 2.0, 100.0]))],
+            segment: 2,
         };
         let n = chain
             .restore_rings(&index, |_, seq| Ok(snapshot(seq)))
@@ -234,5 +240,32 @@ pub(crate) mod tests {
         assert_eq!(chain.newest_keyframe(Uav::Right).unwrap().seq, 9);
         let wrong = chain.restore_rings(&index, |_, _| Ok(snapshot(4)));
         assert!(wrong.unwrap_err().contains("another keyframe"));
+    }
+
+    /// A new stream segment empties the rings and the ruler; the index says which
+    /// segment they are of, so a restart in the new one does not bring the old back.
+    #[test]
+    fn a_new_segment_empties_the_rings() {
+        let config = crate::MatchingConfig::default();
+        let mut chain = VisionChain::new(config, geolocation::EstimatorConfig::default()).unwrap();
+        chain.refresh_on_thread(true).unwrap();
+        let index = RingIndex {
+            keyframes: [vec![], vec![3, 9]],
+            smoothed: [None, Some((0.3, [1.0, 2.0, 100.0]))],
+            segment: 0,
+        };
+        chain
+            .restore_rings(&index, |_, seq| Ok(snapshot(seq)))
+            .unwrap();
+        chain.start_over(1).unwrap();
+        assert_eq!(chain.segment(), 1);
+        assert_eq!(
+            chain.ring_index(),
+            RingIndex {
+                keyframes: [vec![], vec![]],
+                smoothed: [None, None],
+                segment: 1,
+            }
+        );
     }
 }

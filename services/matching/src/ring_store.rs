@@ -126,6 +126,7 @@ mod tests {
         let index = RingIndex {
             keyframes: [vec![], keyframes.to_vec()],
             smoothed: [None, None],
+            segment: 0,
         };
         chain
             .restore_rings(&index, |_, seq| Ok(snapshot(seq)))

@@ -194,6 +194,17 @@ impl MotionDetector {
         })
     }
 
+    /// Forgets `camera`'s ground motion, history and track: its stream jumped (a new
+    /// segment), so the old frames are not the ground under it now. The operator's
+    /// designation (`acquire_px`) stands again.
+    pub fn start_over(&mut self, camera: usize) {
+        let Some(cam) = self.cameras.get_mut(camera) else {
+            return;
+        };
+        *cam = Camera::default();
+        cam.designated = self.config.acquire_px.map(|at| at[camera]);
+    }
+
     /// The target in `camera`'s (0 = left, 1 = right) BGR `frame`, if it moves;
     /// `gate`: the geolocation filter's prediction in this frame.
     pub fn detect(

@@ -54,6 +54,11 @@ pub struct RunArgs {
     /// Stream the source again and again until SIGINT/SIGTERM (soak runs).
     #[arg(long = "loop")]
     pub looping: bool,
+    /// Stream the source this many times, then end as at the end of a recording (a
+    /// `--loop` that stops by itself: every pass is a segment of its own, and at
+    /// `--rate max` each repeats the first exactly).
+    #[arg(long, value_parser = clap::value_parser!(u64).range(1..))]
+    pub laps: Option<u64>,
     /// Output directory (created; existing outputs in it are replaced).
     #[arg(long, default_value = "dualgeo-out")]
     pub out: PathBuf,
@@ -255,6 +260,9 @@ pub fn run(args: &RunArgs) -> Result<()> {
         acq.extend(args.scenario.to_args());
         if args.looping {
             acq.push("--loop".into());
+        }
+        if let Some(n) = args.laps {
+            acq.extend(["--laps".into(), n.to_string()]);
         }
         acq.extend(["--log-dir".into(), stream_dir.display().to_string()]);
         services.push(Service::spawn("acquisition", &acq)?);

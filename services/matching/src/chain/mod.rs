@@ -202,6 +202,8 @@ pub struct VisionChain {
     landed_admissions: [bool; 2],
     /// What the last refreshes did ([`VisionChain::take_landings`]).
     landings: VecDeque<LandingReport>,
+    /// The stream segment (`FrameHeader::segment`) the trackers and rings are of.
+    pub(crate) segment: u32,
 }
 
 fn micros(since: Instant) -> f64 {
@@ -230,9 +232,41 @@ impl VisionChain {
             refresher: Refresher::inline(&config)?,
             landed_admissions: [false; 2],
             landings: VecDeque::new(),
+            segment: 0,
             config,
             estimator,
         })
+    }
+
+    /// The stream segment the chain's state is of.
+    pub fn segment(&self) -> u32 {
+        self.segment
+    }
+
+    /// The stream jumped to `segment` (a looped recording starting over): the
+    /// trackers, rings, priors and refreshes start over, as for a new stream. The old
+    /// keyframes show a world that is gone: their fits would fail (past images outside
+    /// the image) or, worse, pair the target with whatever lies there. A refresh in
+    /// flight is waited for and dropped; the refresh thread and the buffers stay.
+    /// Counts not yet taken are kept. Every field that holds what was seen is
+    /// emptied here: `e2e_pipeline`'s second pass repeating the first byte for byte
+    /// checks that none is forgotten.
+    pub fn start_over(&mut self, segment: u32) -> Result<(), ChainError> {
+        self.refresher.start_over()?;
+        for tracker in &mut self.trackers {
+            tracker.start_over();
+        }
+        self.rings = [(); 2]
+            .map(|_| KeyframeRing::new(self.config.ring_capacity, self.config.keyframe_spacing_m));
+        self.smoothed = [None, None];
+        self.priors.clear();
+        self.failed.clear();
+        self.links.clear();
+        self.steps.clear();
+        self.landed_admissions = [false; 2];
+        self.landings.clear();
+        self.segment = segment;
+        Ok(())
     }
 
     /// Runs the refreshes on a thread of their own (the service); `fixed`: they land

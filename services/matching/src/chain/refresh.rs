@@ -379,6 +379,18 @@ impl Refresher {
         Ok(landing.map(|l| (l, waited)))
     }
 
+    /// The stream jumped (a new segment): the refreshes in flight are waited for and
+    /// dropped, the cadence starts again. The thread stays (OpenCV keeps data per
+    /// thread that ever called it: a thread per segment would grow the service).
+    pub(super) fn start_over(&mut self) -> Result<(), ChainError> {
+        for uav in [Uav::Left, Uav::Right] {
+            self.drain(uav)?;
+        }
+        self.done = [None, None];
+        self.last = [None, None];
+        Ok(())
+    }
+
     /// The frame `uav`'s refresh in flight was taken on.
     pub(super) fn in_flight(&self, uav: Uav) -> Option<u64> {
         self.in_flight[uav.index()]

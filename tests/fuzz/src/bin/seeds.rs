@@ -265,6 +265,7 @@ fn checkpoint_seeds(dir: &Path) {
         last_t_s: 10.5,
         filter: Some(temporal.snapshot()),
         tracks: Some(tracks_snapshot()),
+        segment: 0,
     };
     let filter = checkpoint::encode(CHECKPOINT_KIND, &resume).expect("encode");
     // Keyframes as matching admits them: run the frames target's pairs through an intake.
