@@ -97,7 +97,11 @@ fn mavlink_and_cot_outputs_are_decoded_by_outside_clients() {
     };
     let tracking = of_type("CAMERA_TRACKING_GEO_STATUS");
     let heartbeats = of_type("HEARTBEAT");
-    assert_eq!(tracking.len() + heartbeats.len(), messages.len());
+    let vehicles = of_type("ADSB_VEHICLE");
+    assert_eq!(
+        tracking.len() + heartbeats.len() + vehicles.len(),
+        messages.len()
+    );
     assert_eq!(
         tracking.len(),
         rows.len(),
@@ -137,6 +141,28 @@ fn mavlink_and_cot_outputs_are_decoded_by_outside_clients() {
         assert!(m["dist"].as_f64().is_some_and(|d| d > 50.0), "{m}");
     }
 
+    // Every vehicle as an ADSB_VEHICLE with its id in the ICAO address: the default
+    // scene has the target alone (id 0, address 0xF00000, callsign DGV0).
+    assert_eq!(vehicles.len(), rows.len(), "one ADSB_VEHICLE per estimate");
+    for (m, row) in vehicles.iter().zip(&rows) {
+        assert_eq!(m["ICAO_address"], 0xF0_0000, "{m}");
+        assert_eq!(m["callsign"], "DGV0", "{m}");
+        assert_eq!(
+            m["emitter_type"], 18,
+            "ADSB_EMITTER_TYPE_SERVICE_SURFACE: {m}"
+        );
+        let lat = m["lat"].as_f64().unwrap() / 1e7;
+        let lon = m["lon"].as_f64().unwrap() / 1e7;
+        assert!(
+            (lat - row[0]).abs() < 2e-7 && (lon - row[1]).abs() < 2e-7,
+            "{m} vs {row:?}"
+        );
+        assert!(
+            (m["altitude"].as_f64().unwrap() / 1000.0 - row[2]).abs() < 0.01,
+            "{m} vs {row:?}"
+        );
+    }
+
     let events = report["cot"].as_array().expect("cot list");
     assert_eq!(events.len(), rows.len(), "one CoT event per estimate");
     let uid = &events[0]["uid"];
@@ -153,6 +179,7 @@ fn mavlink_and_cot_outputs_are_decoded_by_outside_clients() {
     let counters: Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("counters.json")).unwrap()).unwrap();
     assert_eq!(counters["supervisor.mavlink.sent"], rows.len());
+    assert_eq!(counters["supervisor.mavlink.vehicles_sent"], rows.len());
     assert_eq!(counters["supervisor.cot.sent"], rows.len());
     assert!(counters.get("supervisor.mavlink.send_failed").is_none());
 }
@@ -169,6 +196,8 @@ fn an_output_address_that_is_wrong_is_refused_before_anything_starts() {
             "cannot resolve",
         ),
         ("--mcap", "/no/such/dir/run.mcap", "no directory"),
+        ("--mavlink-primary", "nearest:95,0", "nearest:LAT,LON"),
+        ("--mavlink-icao-base", "0x1000000", "24 bits"),
     ] {
         let o = Command::new(env!("CARGO_BIN_EXE_dualgeo"))
             .args(["run", "--duration-s", "1", "--out"])

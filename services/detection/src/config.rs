@@ -13,11 +13,15 @@
 //!
 //! [detection.motion]       # optional with kind = "motion": every key has a default
 //! threshold = 30
+//!
+//! [detection.others]       # other vehicles' colours (several targets); defaults:
+//! saturation_min = 150     # every vivid hue the target's hue_ranges leave
 //! ```
 //!
 //! Unknown keys are refused at every level, as everywhere in the configuration.
 
 use crate::motion::MotionConfig;
+use crate::other_colours::OtherColoursConfig;
 use crate::yolo::YoloConfig;
 use crate::ColourBlobConfig;
 use serde::{Deserialize, Serialize};
@@ -51,6 +55,9 @@ pub struct DetectionConfig {
     pub yolo: Option<YoloConfig>,
     /// `[detection.motion]` (defaults when absent).
     pub motion: MotionConfig,
+    /// `[detection.others]`: the other vehicles' colours, with the colour detector and
+    /// `candidates` (defaults when absent).
+    pub others: OtherColoursConfig,
 }
 
 impl Default for DetectionConfig {
@@ -61,6 +68,7 @@ impl Default for DetectionConfig {
             colour: ColourBlobConfig::default(),
             yolo: None,
             motion: MotionConfig::default(),
+            others: OtherColoursConfig::default(),
         }
     }
 }
@@ -99,6 +107,17 @@ impl TryFrom<toml::Table> for DetectionConfig {
             }
             None => MotionConfig::default(),
         };
+        let others = match table.remove("others") {
+            Some(v) => {
+                let o = v
+                    .try_into::<OtherColoursConfig>()
+                    .map_err(|e| format!("[detection.others]: {e}"))?;
+                o.validate()
+                    .map_err(|e| format!("[detection.others]: {e}"))?;
+                o
+            }
+            None => OtherColoursConfig::default(),
+        };
         if kind == DetectorKind::Yolo && yolo.is_none() {
             return Err("kind = \"yolo\" needs a [detection.yolo] table with its model".into());
         }
@@ -111,6 +130,7 @@ impl TryFrom<toml::Table> for DetectionConfig {
             colour,
             yolo,
             motion,
+            others,
         })
     }
 }
@@ -139,6 +159,45 @@ mod tests {
         assert!(parse("[detection]\ncandidates = 3\n")
             .unwrap_err()
             .contains("candidates"));
+    }
+
+    #[test]
+    fn the_other_colours_take_their_optional_table() {
+        let c = parse(
+            "[detection.others]
+hue_ranges = [[100, 130]]
+min_area_px = 50
+",
+        )
+        .unwrap();
+        assert_eq!(c.others.hue_ranges, Some(vec![[100, 130]]));
+        assert_eq!(c.others.min_area_px, 50);
+        for (bad, says) in [
+            (
+                "[detection.others]
+hue_ranges = [[130, 100]]
+",
+                "hue_ranges",
+            ),
+            (
+                "[detection.others]
+saturation = 3
+",
+                "saturation",
+            ),
+            (
+                "[detection.others]
+max_area_px = 1
+",
+                "max_area_px",
+            ),
+        ] {
+            let e = parse(bad).unwrap_err();
+            assert!(
+                e.contains("[detection.others]") && e.contains(says),
+                "{bad}: {e}"
+            );
+        }
     }
 
     #[test]

@@ -13,6 +13,7 @@ pub mod constellation;
 pub mod frame_view;
 pub mod learned;
 pub mod motion;
+pub mod other_colours;
 mod partial_view;
 pub mod prediction_gate;
 pub mod template_track;

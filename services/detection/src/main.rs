@@ -24,7 +24,8 @@
 //! on its own thread). With `kind = "motion"` (`detection::motion`): `movers` (blobs
 //! moving against the ground, summed over frames), `no_ground` (frames whose ground
 //! motion was not measured), `acquired` and `track_lost`. With `[detection] candidates`
-//! (default): `candidates` (other objects published beside the target, summed over
+//! (default; the colour detector adds every blob of another vivid colour,
+//! `[detection.others]`): `candidates` (other objects published beside the target, summed over
 //! frames), `candidates_overflow` (left out for room) and `candidates_failed`.
 
 use anyhow::{Context, Result};
@@ -33,6 +34,7 @@ use detection::config::{DetectionConfig, DetectorKind};
 use detection::frame_view::frame_mat;
 use detection::learned::LearnedDetector;
 use detection::motion::MotionDetector;
+use detection::other_colours::OtherColours;
 use detection::prediction_gate::{gate_for, FrameGeometry, RecentPredictions, TargetPrediction};
 use detection::TrackedDetector;
 use shared_types::clock::{elapsed_us, monotonic_ns};
@@ -71,6 +73,14 @@ fn run() -> Result<()> {
     let config: DetectionConfig = load_section(args.service.config.as_deref(), "detection")?;
     let gate_config = config.colour.gate;
     let candidates = config.candidates;
+    // Other vehicles' colours: with the colour detector only (a mover is any colour).
+    let others = match config.kind {
+        DetectorKind::Colour if candidates => Some(
+            OtherColours::new(config.others.clone(), &config.colour.hue_ranges)
+                .map_err(|e| Permanent::new("[detection.others]", e))?,
+        ),
+        _ => None,
+    };
     let detector = Chosen::new(config, args.service.flow_controlled)
         .map_err(|e| Permanent::new("[detection] configuration", e))?;
     let endpoint = Endpoint::new(&args.service.run_id, "detection")?;
@@ -85,6 +95,7 @@ fn run() -> Result<()> {
     let mut stage = Detecting {
         detector,
         candidates,
+        others,
         found_all: Vec::new(),
         predictions: RecentPredictions::default(),
         segments: [None; 2],
@@ -178,6 +189,8 @@ struct Detecting {
     detector: Chosen,
     /// `[detection] candidates`: publish every other object found.
     candidates: bool,
+    /// `[detection.others]`: blobs of the other vehicles' colours.
+    others: Option<OtherColours>,
     /// Everything the detector found in the frame (reused).
     found_all: Vec<detection::Detection>,
     predictions: RecentPredictions,
@@ -321,7 +334,12 @@ impl Detecting {
         let found = &mut self.found_all;
         found.clear();
         let listed = match &mut self.detector {
-            Chosen::Colour(d) => d.candidates(mat, found),
+            Chosen::Colour(d) => d
+                .candidates(mat, found)
+                .and_then(|()| match &mut self.others {
+                    Some(o) => o.find(mat, found),
+                    None => Ok(()),
+                }),
             Chosen::Motion(d) => {
                 found.extend(d.last_movers().iter().map(|m| detection::Detection {
                     bbox: m.bbox,

@@ -11,6 +11,11 @@
 //! - **Birth**: a fix no track takes starts a tentative track; it is confirmed (and
 //!   gets its id, counted from 1: 0 is the target) after `confirm_hits` fixes within
 //!   its first `confirm_window` pairs (M of N), else dropped.
+//! - **Moving vehicles only**: a confirmed track is reported once it has been seen
+//!   moving, its speed at least `min_speed_mps` and its velocity nonzero at 99 %
+//!   (χ²(2) 9.21 over its covariance); a parked car, or a vivid roof the other colours
+//!   found, is tracked (its fixes do not start new tracks) but never reported. Ids are
+//!   given at confirmation, so the reported ones may skip numbers.
 //! - **Deletion**: a confirmed track with no fix for `delete_after_s`, or whose 1σ
 //!   horizontal position grows beyond `delete_sigma_m`. A vehicle hidden for less
 //!   (under the bridge: ~1.3 s) coasts on its prediction and takes its fixes again
@@ -53,6 +58,9 @@ pub struct TrackConfig {
     pub target_exclusion_m: f64,
     /// Most confirmed tracks reported (at most the estimate message's room, 8).
     pub max_tracks: usize,
+    /// A track is reported once its speed has reached this, m/s (0: every confirmed
+    /// track, parked cars too).
+    pub min_speed_mps: f64,
 }
 
 impl Default for TrackConfig {
@@ -68,6 +76,7 @@ impl Default for TrackConfig {
             fix_sigma_floor_m: 0.5,
             target_exclusion_m: 2.0,
             max_tracks: 8,
+            min_speed_mps: 1.0,
         }
     }
 }
@@ -84,6 +93,8 @@ impl TrackConfig {
         let ok = positive.iter().all(|v| v.is_finite() && *v > 0.0)
             && self.target_exclusion_m.is_finite()
             && self.target_exclusion_m >= 0.0
+            && self.min_speed_mps.is_finite()
+            && self.min_speed_mps >= 0.0
             && (1..=32).contains(&self.confirm_window)
             && (1..=self.confirm_window).contains(&self.confirm_hits)
             && self.max_tracks <= shared_types::messages::MAX_TRACKS
@@ -94,7 +105,7 @@ impl TrackConfig {
             Err(format!(
                 "[tracks]: need 1 <= confirm_hits <= confirm_window <= 32, max_tracks <= {}, \
                  positive finite times, sigmas and gate (gate_chi2 <= 1e6), \
-                 target_exclusion_m >= 0: {self:?}",
+                 target_exclusion_m >= 0, min_speed_mps >= 0: {self:?}",
                 shared_types::messages::MAX_TRACKS
             ))
         }
@@ -156,6 +167,8 @@ struct Track {
     hits: u32,
     pairs: u32,
     updated: bool,
+    /// It has been seen moving (reported from then on).
+    moved: bool,
 }
 
 /// Every other vehicle's track.
@@ -194,6 +207,7 @@ pub struct TrackState {
     pub last_fix_s: f64,
     pub hits: u32,
     pub pairs: u32,
+    pub moved: bool,
 }
 
 /// [`Tracks`] as a checkpoint keeps them.
@@ -247,6 +261,7 @@ impl Tracks {
                     last_fix_s: t.last_fix_s,
                     hits: t.hits,
                     pairs: t.pairs,
+                    moved: t.moved,
                 })
                 .collect(),
             next_id: self.next_id,
@@ -305,6 +320,7 @@ impl Tracks {
                 hits: t.hits,
                 pairs: t.pairs,
                 updated: false,
+                moved: t.moved,
             });
         }
         tracks.next_id = snap.next_id;
@@ -405,6 +421,7 @@ impl Tracks {
                 hits: 0,
                 pairs: 0,
                 updated: true,
+                moved: false,
             });
         }
         // Birth and deletion.
@@ -436,10 +453,13 @@ impl Tracks {
         });
         self.counts = counts;
         self.next_id = next_id;
+        for t in self.tracks.iter_mut().filter(|t| t.id != 0 && !t.moved) {
+            t.moved = c.min_speed_mps == 0.0 || seen_moving(t, c.min_speed_mps);
+        }
         let mut out: Vec<TrackReport> = self
             .tracks
             .iter()
-            .filter(|t| t.id != 0)
+            .filter(|t| t.id != 0 && t.moved)
             .map(|t| TrackReport {
                 id: t.id,
                 position: [t.x[0], t.x[1], t.z],
@@ -457,6 +477,18 @@ impl Tracks {
         out.truncate(c.max_tracks);
         out
     }
+}
+
+/// Whether `track` moves: speed at least `min_speed` and its velocity nonzero at 99 %
+/// (χ²(2) = 9.21 over the velocity's covariance).
+fn seen_moving(track: &Track, min_speed: f64) -> bool {
+    let v = Vector2::new(track.x[2], track.x[3]);
+    let significant = track
+        .p
+        .fixed_view::<2, 2>(2, 2)
+        .try_inverse()
+        .is_some_and(|inv| v.dot(&(inv * v)) > 9.21);
+    v.norm() >= min_speed && significant
 }
 
 /// The constant-velocity prediction to `t_s` (nothing for a time not after the track's).
@@ -528,7 +560,8 @@ mod tests {
     const DT: f64 = 1.0 / 30.0;
 
     /// Two vehicles 5 m apart driving north at 10 m/s: each gets a track of its own
-    /// after three pairs, ids 1 and 2, kept through a 1.3 s gap (the bridge).
+    /// (confirmed after three pairs, reported once seen moving: within 0.4 s), ids 1
+    /// and 2, kept through a 1.3 s gap (the bridge).
     #[test]
     fn two_vehicles_get_stable_ids_through_a_gap() {
         let mut tracks = Tracks::new(TrackConfig::default()).unwrap();
@@ -546,7 +579,7 @@ mod tests {
             if k == 1 {
                 assert!(out.is_empty(), "confirmed after one pair");
             }
-            if k >= 2 {
+            if k >= 12 {
                 assert_eq!(out.len(), 2, "pair {k}");
                 let a = out.iter().find(|r| r.id == 1).unwrap();
                 assert!((a.position[0] - 0.0).abs() < 1.0, "pair {k}: {a:?}");
@@ -639,7 +672,11 @@ mod tests {
     /// A new segment drops every track; the next vehicle gets a new id.
     #[test]
     fn a_new_segment_drops_the_tracks_and_never_gives_an_id_again() {
-        let mut tracks = Tracks::new(TrackConfig::default()).unwrap();
+        let every = TrackConfig {
+            min_speed_mps: 0.0,
+            ..TrackConfig::default()
+        };
+        let mut tracks = Tracks::new(every).unwrap();
         let mut out = Vec::new();
         for k in 0..10 {
             out = tracks.update(k as f64 * DT, &[fix(0.0, 0.0), fix(9.0, 0.0)], None);
@@ -656,6 +693,30 @@ mod tests {
         assert_eq!(out.iter().map(|r| r.id).collect::<Vec<_>>(), vec![3]);
     }
 
+    /// A parked car is tracked but never reported; with `min_speed_mps = 0` it is.
+    #[test]
+    fn only_what_has_been_seen_moving_is_reported() {
+        for (min_speed, reported) in [(1.0, vec![2]), (0.0, vec![1, 2])] {
+            let config = TrackConfig {
+                min_speed_mps: min_speed,
+                ..TrackConfig::default()
+            };
+            let mut tracks = Tracks::new(config).unwrap();
+            let mut out = Vec::new();
+            for k in 0..90 {
+                let t = k as f64 * DT;
+                // The parked one is seen first (id 1), the mover a pair later (id 2).
+                let mut fixes = vec![fix(20.0, 0.0)];
+                if k > 0 {
+                    fixes.push(fix(0.0, 8.0 * t));
+                }
+                out = tracks.update(t, &fixes, None);
+            }
+            let ids: Vec<u32> = out.iter().map(|r| r.id).collect();
+            assert_eq!(ids, reported, "min_speed_mps {min_speed}");
+        }
+    }
+
     #[test]
     fn bad_configurations_are_refused() {
         for bad in [
@@ -669,6 +730,10 @@ mod tests {
             },
             TrackConfig {
                 confirm_window: 40,
+                ..TrackConfig::default()
+            },
+            TrackConfig {
+                min_speed_mps: -1.0,
                 ..TrackConfig::default()
             },
         ] {

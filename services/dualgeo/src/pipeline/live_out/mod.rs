@@ -1,18 +1,21 @@
 //! The target, live, to ground-control software (issue #14): every valid estimate as a
 //! MAVLink CAMERA_TRACKING_GEO_STATUS (`--mavlink-out`, with a 1 Hz HEARTBEAT) and as a
 //! Cursor-on-Target event (`--cot-out`), over UDP. The other vehicles' tracks go out
-//! as CoT events of their own (a uid per track, stale when it is deleted); MAVLink
-//! carries the target only (the common dialect has no geolocation message with a
-//! target id). Sending never stops the run: a send
+//! as CoT events of their own (a uid per track, stale when it is deleted) and, with
+//! the target, as MAVLink ADSB_VEHICLE messages (an ICAO address per id,
+//! `mavlink_out.rs`); CAMERA_TRACKING_GEO_STATUS carries one vehicle, the one
+//! `--mavlink-primary` chooses (`primary.rs`). Sending never stops the run: a send
 //! that fails or would block is dropped and counted (`mavlink.send_failed`,
-//! `cot.send_failed`); what was sent is counted (`mavlink.sent`, `mavlink.heartbeats`,
-//! `cot.sent`) in the supervisor's counters.
+//! `cot.send_failed`); what was sent is counted (`mavlink.sent`,
+//! `mavlink.vehicles_sent`, `mavlink.heartbeats`, `cot.sent`) in the supervisor's
+//! counters.
 //!
 //! Both need the source's geodetic origin (recording.toml's `[origin]`; the built-in
 //! simulator has one): without it the run is refused before anything starts.
 
 mod cot_out;
 mod mavlink_out;
+pub mod primary;
 mod udp;
 
 use super::track::{geodetic, one_sigma};
@@ -39,6 +42,16 @@ pub struct LiveOutArgs {
     /// MAVLink component id (100: MAV_COMP_ID_CAMERA, the id a tracking camera uses).
     #[arg(long, default_value_t = 100)]
     pub mavlink_component_id: u8,
+    /// The vehicle CAMERA_TRACKING_GEO_STATUS carries: `target` (the designated one,
+    /// track 0), `first` (the lowest id located), a track id, or `nearest:LAT,LON`.
+    #[arg(long, default_value = "target", value_parser = clap::value_parser!(primary::Primary))]
+    pub mavlink_primary: primary::Primary,
+    /// Do not send an ADSB_VEHICLE per vehicle (the target and every other track).
+    #[arg(long)]
+    pub no_mavlink_vehicles: bool,
+    /// ICAO address of vehicle 0 in ADSB_VEHICLE; vehicle N is this + N (24 bits).
+    #[arg(long, default_value_t = 0xF0_0000, value_parser = parse_icao)]
+    pub mavlink_icao_base: u32,
     /// Geoid height N (m) at the origin: MAVLink's altitude is AMSL = ellipsoidal − N.
     /// Default: a flight's `geoid_height_m`, else 0 (dualgeo carries no geoid model, so
     /// then the ellipsoidal height is sent).
@@ -54,6 +67,21 @@ pub struct LiveOutArgs {
     /// Seconds after which a TAK client greys the target out if no newer event came.
     #[arg(long, default_value_t = 5.0)]
     pub cot_stale_s: f64,
+}
+
+/// A 24-bit ICAO address, decimal or `0x` hexadecimal.
+fn parse_icao(s: &str) -> Result<u32, String> {
+    let v = match s.strip_prefix("0x").or_else(|| s.strip_prefix("0X")) {
+        Some(hex) => u32::from_str_radix(hex, 16),
+        None => s.parse(),
+    }
+    .map_err(|e| format!("{s:?}: {e}"))?;
+    if v > 0xFF_FFFF {
+        return Err(format!(
+            "{s:?}: an ICAO address has 24 bits (at most 0xFFFFFF)"
+        ));
+    }
+    Ok(v)
 }
 
 /// One estimate as the outside world wants it: geodetic, with 1σ accuracies; NaN
@@ -123,6 +151,8 @@ pub struct LiveOutputs {
     last_heartbeat: Option<Instant>,
     /// The other vehicles' tracks of the last estimate, with their last fix.
     tracks: BTreeMap<u32, TargetFix>,
+    primary: primary::Primary,
+    vehicles: bool,
 }
 
 impl LiveOutputs {
@@ -159,6 +189,8 @@ impl LiveOutputs {
                 .transpose()?,
             last_heartbeat: None,
             tracks: BTreeMap::new(),
+            primary: args.mavlink_primary,
+            vehicles: !args.no_mavlink_vehicles,
         })
     }
 
@@ -169,13 +201,19 @@ impl LiveOutputs {
         let Some(origin) = self.origin.as_ref() else {
             return;
         };
-        if let Some(fix) = TargetFix::of(e, origin) {
-            if let Some(m) = &mut self.mavlink {
+        if let Some(m) = &mut self.mavlink {
+            let all = primary::vehicles(e, origin);
+            if let Some((_, fix)) = primary::choose(self.primary, &all) {
                 m.send_fix(&fix, stats);
             }
-            if let Some(c) = &mut self.cot {
-                c.send_fix(&fix, stats);
+            if self.vehicles {
+                for (id, fix) in &all {
+                    m.send_vehicle(*id, fix, stats);
+                }
             }
+        }
+        if let (Some(c), Some(fix)) = (&mut self.cot, TargetFix::of(e, origin)) {
+            c.send_fix(&fix, stats);
         }
         let Some(c) = &mut self.cot else {
             return;
@@ -253,6 +291,9 @@ mod tests {
             mavlink_out: None,
             mavlink_system_id: 255,
             mavlink_component_id: 100,
+            mavlink_primary: primary::Primary::Target,
+            no_mavlink_vehicles: false,
+            mavlink_icao_base: 0xF0_0000,
             geoid_height_m: None,
             cot_out: Some(format!("udp://127.0.0.1:{port}")),
             cot_type: "a-u-G-E-V".into(),
