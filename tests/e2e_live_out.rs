@@ -117,17 +117,20 @@ fn mavlink_and_cot_outputs_are_decoded_by_outside_clients() {
         assert_eq!(m["srcComponent"], 100);
     }
     assert_eq!(heartbeats[0]["type"], 30, "MAV_TYPE_CAMERA");
-    for (m, row) in tracking.iter().zip(&rows) {
+    // A message's degE7 position and altitude (`alt_key`, in `alt_unit` metres) against
+    // a track.csv row.
+    let same_place = |m: &Value, row: &[f64; 3], alt_key: &str, alt_unit: f64| {
         let lat = m["lat"].as_f64().unwrap() / 1e7;
         let lon = m["lon"].as_f64().unwrap() / 1e7;
+        let alt = m[alt_key].as_f64().unwrap() * alt_unit;
         assert!(
             (lat - row[0]).abs() < 2e-7 && (lon - row[1]).abs() < 2e-7,
             "{m} vs {row:?}"
         );
-        assert!(
-            (m["alt"].as_f64().unwrap() - row[2]).abs() < 0.01,
-            "{m} vs {row:?}"
-        );
+        assert!((alt - row[2]).abs() < 0.01, "{m} vs {row:?}");
+    };
+    for (m, row) in tracking.iter().zip(&rows) {
+        same_place(m, row, "alt", 1.0);
         assert!(m["h_acc"].as_f64().is_some_and(|h| h > 0.0), "{m}");
         // The default estimator is the temporal filter: its velocity is known.
         assert!(
@@ -151,16 +154,7 @@ fn mavlink_and_cot_outputs_are_decoded_by_outside_clients() {
             m["emitter_type"], 18,
             "ADSB_EMITTER_TYPE_SERVICE_SURFACE: {m}"
         );
-        let lat = m["lat"].as_f64().unwrap() / 1e7;
-        let lon = m["lon"].as_f64().unwrap() / 1e7;
-        assert!(
-            (lat - row[0]).abs() < 2e-7 && (lon - row[1]).abs() < 2e-7,
-            "{m} vs {row:?}"
-        );
-        assert!(
-            (m["altitude"].as_f64().unwrap() / 1000.0 - row[2]).abs() < 0.01,
-            "{m} vs {row:?}"
-        );
+        same_place(m, row, "altitude", 1e-3);
     }
 
     let events = report["cot"].as_array().expect("cot list");

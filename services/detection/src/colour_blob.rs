@@ -8,6 +8,7 @@
 
 use super::{check_bgr, DetectError, Detection, Detector, PartialViewConfig, TrackHint};
 use crate::constellation;
+use crate::hue_mask::Scratch;
 use crate::prediction_gate::{Gate, GateConfig};
 use opencv::core as cv;
 use opencv::prelude::*;
@@ -84,17 +85,12 @@ impl Default for ColourBlobConfig {
 
 pub struct ColourBlobDetector {
     config: ColourBlobConfig,
-    hsv: cv::Mat,
-    mask: cv::Mat,
-    part: cv::Mat,
-    combined: cv::Mat,
-    labels: cv::Mat,
-    stats: cv::Mat,
-    centroids: cv::Mat,
+    /// The whole frame's HSV pixels, thresholds and components.
+    px: Scratch,
     /// The window search's own buffers, swapped in while it runs: each set keeps its
     /// size from frame to frame, so neither is reallocated when the detector switches
     /// between window and whole frame (the service's memory stays flat).
-    window_scratch: [cv::Mat; 7],
+    window_px: Scratch,
     exposure_retries: u64,
     window_looks: u64,
     window_misses: u64,
@@ -152,14 +148,8 @@ impl ColourBlobDetector {
         }
         Ok(Self {
             config,
-            hsv: cv::Mat::default(),
-            mask: cv::Mat::default(),
-            part: cv::Mat::default(),
-            combined: cv::Mat::default(),
-            labels: cv::Mat::default(),
-            stats: cv::Mat::default(),
-            centroids: cv::Mat::default(),
-            window_scratch: Default::default(),
+            px: Scratch::default(),
+            window_px: Scratch::default(),
             exposure_retries: 0,
             window_looks: 0,
             window_misses: 0,
@@ -230,19 +220,12 @@ impl ColourBlobDetector {
 
     /// Swaps the whole-frame buffers with the window search's.
     fn swap_scratch(&mut self) {
-        let [hsv, mask, part, combined, labels, stats, centroids] = &mut self.window_scratch;
-        std::mem::swap(&mut self.hsv, hsv);
-        std::mem::swap(&mut self.mask, mask);
-        std::mem::swap(&mut self.part, part);
-        std::mem::swap(&mut self.combined, combined);
-        std::mem::swap(&mut self.labels, labels);
-        std::mem::swap(&mut self.stats, stats);
-        std::mem::swap(&mut self.centroids, centroids);
+        std::mem::swap(&mut self.px, &mut self.window_px);
     }
 
-    /// The 99th percentile of the V channel of `self.hsv`, 0–255.
+    /// The 99th percentile of the V channel of `self.px.hsv`, 0–255.
     fn bright_percentile(&self) -> Result<u8, DetectError> {
-        let bytes = self.hsv.data_bytes()?;
+        let bytes = self.px.hsv.data_bytes()?;
         let mut histogram = [0u64; 256];
         for px in bytes.chunks_exact(3) {
             histogram[px[2] as usize] += 1;
@@ -275,30 +258,15 @@ impl ColourBlobDetector {
         // Pixels here are the frame's; the buffers' (0, 0) is the window's origin.
         let origin = window.unwrap_or([0.0, 0.0]);
         let in_window = window.is_some();
-        let c = &self.config;
-        for (i, [lo, hi]) in c.hue_ranges.iter().enumerate() {
-            let low = cv::Scalar::new(*lo as f64, c.saturation_min as f64, value_min, 0.0);
-            let high = cv::Scalar::new(*hi as f64, 255.0, 255.0, 0.0);
-            if i == 0 {
-                cv::in_range(&self.hsv, &low, &high, &mut self.mask)?;
-            } else {
-                cv::in_range(&self.hsv, &low, &high, &mut self.part)?;
-                cv::bitwise_or_def(&self.mask, &self.part, &mut self.combined)?;
-                std::mem::swap(&mut self.mask, &mut self.combined);
-            }
-        }
-        let n = opencv::imgproc::connected_components_with_stats(
-            &self.mask,
-            &mut self.labels,
-            &mut self.stats,
-            &mut self.centroids,
-            8,
-            cv::CV_32S,
+        let n = self.px.label(
+            &self.config.hue_ranges,
+            self.config.saturation_min as f64,
+            value_min,
         )?;
-        let (cols, rows) = (self.mask.cols(), self.mask.rows());
+        let (cols, rows) = (self.px.mask.cols(), self.px.mask.rows());
         self.blobs.clear();
         for label in 1..n {
-            let stat = |k| self.stats.at_2d::<i32>(label, k).copied();
+            let stat = |k| self.px.stats.at_2d::<i32>(label, k).copied();
             if in_window {
                 let (x, y) = (
                     stat(opencv::imgproc::CC_STAT_LEFT)?,
@@ -317,8 +285,8 @@ impl ColourBlobDetector {
                 continue;
             }
             let centre = [
-                *self.centroids.at_2d::<f64>(label, 0)? + origin[0],
-                *self.centroids.at_2d::<f64>(label, 1)? + origin[1],
+                *self.px.centroids.at_2d::<f64>(label, 0)? + origin[0],
+                *self.px.centroids.at_2d::<f64>(label, 1)? + origin[1],
             ];
             let in_gate = self.gate.is_none_or(|g| g.contains(centre));
             self.blobs.push(Blob {
@@ -459,7 +427,7 @@ impl ColourBlobDetector {
                     .and_then(|part| {
                         opencv::imgproc::cvt_color_def(
                             &part,
-                            &mut self.hsv,
+                            &mut self.px.hsv,
                             opencv::imgproc::COLOR_BGR2HSV,
                         )
                     })
@@ -487,7 +455,11 @@ impl ColourBlobDetector {
         }
         if best.is_none() {
             self.last_whole = true;
-            opencv::imgproc::cvt_color_def(frame, &mut self.hsv, opencv::imgproc::COLOR_BGR2HSV)?;
+            opencv::imgproc::cvt_color_def(
+                frame,
+                &mut self.px.hsv,
+                opencv::imgproc::COLOR_BGR2HSV,
+            )?;
             best = self.pick_blob(value_min, near, None)?;
         }
         if best.is_none() && self.config.adapt_to_exposure {
@@ -518,7 +490,7 @@ impl ColourBlobDetector {
             let (gate, gated) = (self.gate.take(), self.gated_blobs);
             let look = opencv::imgproc::cvt_color_def(
                 frame,
-                &mut self.hsv,
+                &mut self.px.hsv,
                 opencv::imgproc::COLOR_BGR2HSV,
             )
             .map_err(DetectError::from)
@@ -544,7 +516,7 @@ impl ColourBlobDetector {
         (label, area): (i32, i32),
         origin: [f64; 2],
     ) -> Result<Detection, DetectError> {
-        let stat = |k| self.stats.at_2d::<i32>(label, k).map(|v| *v as f64);
+        let stat = |k| self.px.stats.at_2d::<i32>(label, k).map(|v| *v as f64);
         let (left, top) = (
             stat(opencv::imgproc::CC_STAT_LEFT)? + origin[0],
             stat(opencv::imgproc::CC_STAT_TOP)? + origin[1],
@@ -554,8 +526,8 @@ impl ColourBlobDetector {
             stat(opencv::imgproc::CC_STAT_HEIGHT)?,
         );
         let centre = [
-            *self.centroids.at_2d::<f64>(label, 0)? + origin[0],
-            *self.centroids.at_2d::<f64>(label, 1)? + origin[1],
+            *self.px.centroids.at_2d::<f64>(label, 0)? + origin[0],
+            *self.px.centroids.at_2d::<f64>(label, 1)? + origin[1],
         ];
         // Confidence: how well the blob fills its box (a car roof fills most of it),
         // scaled so a rotated rectangle (fill ≥ 0.5) still scores high.

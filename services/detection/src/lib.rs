@@ -11,6 +11,7 @@ mod colour_blob;
 pub mod config;
 pub mod constellation;
 pub mod frame_view;
+mod hue_mask;
 pub mod learned;
 pub mod motion;
 pub mod other_colours;

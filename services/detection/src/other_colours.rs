@@ -13,6 +13,7 @@
 //! views and be located; the tracks report only what has been seen moving
 //! (`[tracks] min_speed_mps`).
 
+use crate::hue_mask::Scratch;
 use crate::{DetectError, Detection};
 use opencv::core as cv;
 use opencv::prelude::*;
@@ -90,13 +91,7 @@ pub struct OtherColours {
     config: OtherColoursConfig,
     hues: Vec<[u8; 2]>,
     small: cv::Mat,
-    hsv: cv::Mat,
-    mask: cv::Mat,
-    part: cv::Mat,
-    combined: cv::Mat,
-    labels: cv::Mat,
-    stats: cv::Mat,
-    centroids: cv::Mat,
+    px: Scratch,
 }
 
 impl OtherColours {
@@ -107,13 +102,7 @@ impl OtherColours {
             hues: config.hues(target_hues),
             config,
             small: cv::Mat::default(),
-            hsv: cv::Mat::default(),
-            mask: cv::Mat::default(),
-            part: cv::Mat::default(),
-            combined: cv::Mat::default(),
-            labels: cv::Mat::default(),
-            stats: cv::Mat::default(),
-            centroids: cv::Mat::default(),
+            px: Scratch::default(),
         })
     }
 
@@ -140,36 +129,24 @@ impl OtherColours {
             )?;
             opencv::imgproc::cvt_color_def(
                 &self.small,
-                &mut self.hsv,
+                &mut self.px.hsv,
                 opencv::imgproc::COLOR_BGR2HSV,
             )?;
         } else {
-            opencv::imgproc::cvt_color_def(frame, &mut self.hsv, opencv::imgproc::COLOR_BGR2HSV)?;
+            opencv::imgproc::cvt_color_def(
+                frame,
+                &mut self.px.hsv,
+                opencv::imgproc::COLOR_BGR2HSV,
+            )?;
         }
         let c = &self.config;
         // A pixel here is k × k of the frame; its centre is at k·x + (k − 1)/2.
         let (kf, half) = (k as f64, (k as f64 - 1.0) / 2.0);
-        for (i, [lo, hi]) in self.hues.iter().enumerate() {
-            let low = cv::Scalar::new(*lo as f64, c.saturation_min as f64, c.value_min as f64, 0.0);
-            let high = cv::Scalar::new(*hi as f64, 255.0, 255.0, 0.0);
-            if i == 0 {
-                cv::in_range(&self.hsv, &low, &high, &mut self.mask)?;
-            } else {
-                cv::in_range(&self.hsv, &low, &high, &mut self.part)?;
-                cv::bitwise_or_def(&self.mask, &self.part, &mut self.combined)?;
-                std::mem::swap(&mut self.mask, &mut self.combined);
-            }
-        }
-        let n = opencv::imgproc::connected_components_with_stats(
-            &self.mask,
-            &mut self.labels,
-            &mut self.stats,
-            &mut self.centroids,
-            8,
-            cv::CV_32S,
-        )?;
+        let n = self
+            .px
+            .label(&self.hues, c.saturation_min as f64, c.value_min as f64)?;
         for label in 1..n {
-            let stat = |k| self.stats.at_2d::<i32>(label, k).copied();
+            let stat = |k| self.px.stats.at_2d::<i32>(label, k).copied();
             let area = stat(opencv::imgproc::CC_STAT_AREA)? * k * k;
             if area < c.min_area_px || area > c.max_area_px {
                 continue;
@@ -181,8 +158,8 @@ impl OtherColours {
                 stat(opencv::imgproc::CC_STAT_HEIGHT)? as f64 * kf,
             ];
             let centre = [
-                *self.centroids.at_2d::<f64>(label, 0)? * kf + half,
-                *self.centroids.at_2d::<f64>(label, 1)? * kf + half,
+                *self.px.centroids.at_2d::<f64>(label, 0)? * kf + half,
+                *self.px.centroids.at_2d::<f64>(label, 1)? * kf + half,
             ];
             out.push(Detection {
                 bbox,
@@ -226,13 +203,7 @@ mod tests {
     /// blue speck below the area bound.
     #[test]
     fn vivid_blobs_of_other_colours_are_found() {
-        let mut frame = cv::Mat::new_rows_cols_with_default(
-            480,
-            640,
-            cv::CV_8UC3,
-            cv::Scalar::new(90.0, 110.0, 95.0, 0.0),
-        )
-        .unwrap();
+        let mut frame = crate::colour_blob::tests::street(&[]);
         let blue = [200.0, 120.0, 40.0];
         for (rect, c) in [
             (cv::Rect::new(100, 50, 20, 10), blue),
