@@ -147,7 +147,12 @@ fn geolocated_within_a_metre(preset: &str, extra: &str, output: Output) {
         })
         .collect();
     let (mut h, mut z) = (Vec::new(), Vec::new());
-    for r in rows(&out.join("track.csv")) {
+    // The target's rows (track_id 0): the scenes' other vehicles have tracks of their
+    // own.
+    for r in rows(&out.join("track.csv"))
+        .into_iter()
+        .filter(|r| r.get("track_id").is_none_or(|id| id == "0"))
+    {
         let t: f64 = r["t_s"].parse().unwrap();
         if t < 8.0 {
             continue;
