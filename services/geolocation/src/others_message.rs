@@ -245,7 +245,12 @@ mod tests {
             let s = SyntheticScenario::default();
             s.bias.at(6.0).map(f64::to_degrees)
         };
-        let mut tracks = Tracks::new(TrackConfig::default()).unwrap();
+        // The synthetic vehicle stands still: every confirmed track is reported.
+        let every = TrackConfig {
+            min_speed_mps: 0.0,
+            ..TrackConfig::default()
+        };
+        let mut tracks = Tracks::new(every).unwrap();
         let mut stats = StageStats::new("t");
         let config = EstimatorConfig::default();
         let mut last = EstimateMsg::default();
