@@ -12,7 +12,8 @@
 //! What: the N(0, σ₀²) bias prior is split into a grid of `bias_hypotheses` per axis
 //! (3: means −30°, 0°, +30° per UAV, each with σ₀/3 = 15°), each one a whole filter
 //! (the same keyframe slots, its own state). Each starts where the current pair's two
-//! rays meet under its own biases. Every update weighs each hypothesis by the
+//! rays meet under its own biases, with that point's own covariance, and a component
+//! whose point curves within it is split into a finer grid (`start_prior.rs`). Every update weighs each hypothesis by the
 //! likelihood of its innovations; one far behind the leader is dropped, two that have
 //! come together are merged (moments matched), so the bank is one filter again within
 //! a few seconds. Until then the estimate is the leader's, its covariance the mixture's

@@ -14,7 +14,7 @@ use nalgebra::{Point3, Vector2, Vector3};
 use rand::Rng;
 use rand_distr::{Distribution, Normal};
 use serde::{Deserialize, Serialize};
-use shared_types::conventions::{camera_to_world, Attitude, Intrinsics, Uav};
+use shared_types::conventions::{camera_to_world, Attitude, Intrinsics, Mount, Uav};
 pub use shared_types::nav_noise::{BiasModel, NavNoise};
 
 /// The scenario's geometry and noise.
@@ -49,6 +49,18 @@ pub struct SyntheticScenario {
     /// σ per pixel coordinate of the target point (detection/matching noise), pixels.
     pub sigma_pixel_px: f64,
     pub bias: BiasModel,
+    /// How far the camera looks forward of straight down, degrees (0: the paper's nadir
+    /// camera). A tilted camera's image enters the estimator as its equivalent nadir
+    /// attitude (`Mount::equivalent_nadir_attitude`), the AHRS's errors applied to the
+    /// body as the simulator does, so some of its pitch and roll errors turn into the
+    /// equivalent yaw.
+    #[serde(default)]
+    pub camera_tilt_deg: f64,
+    /// How far behind the target the UAVs fly, metres (0: abreast, the paper's
+    /// geometry). A tilted camera sees the target at its centre line from
+    /// `altitude_agl_m · tan(camera_tilt_deg)` behind.
+    #[serde(default)]
+    pub trail_m: f64,
 }
 
 impl Default for SyntheticScenario {
@@ -73,6 +85,8 @@ impl Default for SyntheticScenario {
                 delta0_deg: 20.0,
                 rate_deg_s: 0.2,
             },
+            camera_tilt_deg: 0.0,
+            trail_m: 0.0,
         }
     }
 }
@@ -139,9 +153,10 @@ impl SyntheticScenario {
             Uav::Right => 1.3,
         };
         let ground = self.target_at(t_s);
+        let back = self.trail_m * Vector3::new(h.sin(), h.cos(), 0.0);
         let position = Point3::new(
-            ground.x + side * self.uav_separation_m * right.x,
-            ground.y + side * self.uav_separation_m * right.y,
+            ground.x + side * self.uav_separation_m * right.x - back.x,
+            ground.y + side * self.uav_separation_m * right.y - back.y,
             self.ground_z_m + self.altitude_agl_m + (0.37 * t_s + phase).sin(),
         );
         let sway = self.sway_deg.to_radians();
@@ -151,6 +166,18 @@ impl SyntheticScenario {
             sway * (1.1 * t_s + 2.0 * phase).cos(),
         );
         (position, attitude)
+    }
+
+    /// The attitude the estimator is given for a body at `body`: the body's own for a
+    /// nadir camera, else its camera's equivalent nadir attitude (the form every
+    /// recording of a tilted camera is read into).
+    pub fn camera_attitude(&self, body: Attitude) -> Attitude {
+        if self.camera_tilt_deg == 0.0 {
+            body
+        } else {
+            Mount::from_degrees(0.0, self.camera_tilt_deg - 90.0, 0.0)
+                .equivalent_nadir_attitude(body)
+        }
     }
 
     /// Time between two images of one UAV that satisfy the baseline constraint.
@@ -183,7 +210,8 @@ impl SyntheticScenario {
         for (uav, k) in order {
             let t_k = t_s - k as f64 * self.keyframe_interval_s();
             let (position, attitude) = self.uav_at(uav, t_k);
-            let cam = camera_to_world(attitude).transpose() * (target - position);
+            let cam =
+                camera_to_world(self.camera_attitude(attitude)).transpose() * (target - position);
             let pixel = self
                 .intrinsics
                 .project(cam)
@@ -207,11 +235,11 @@ impl SyntheticScenario {
                         sample(&pos_noise[1]),
                         sample(&pos_noise[2]),
                     ),
-                attitude: Attitude::new(
+                attitude: self.camera_attitude(Attitude::new(
                     attitude.yaw + bias + sample(&att_noise[0]),
                     attitude.pitch + sample(&att_noise[1]),
                     attitude.roll + sample(&att_noise[2]),
-                ),
+                )),
                 pixel: pixel + Vector2::new(sample(&px_noise), sample(&px_noise)),
                 intrinsics: self.intrinsics,
             });

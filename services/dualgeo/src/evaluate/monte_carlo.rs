@@ -33,13 +33,15 @@ pub const WARM_UP_S: f64 = 10.0;
 /// Bumped when the code changes what a run gives for the same inputs, so cached runs
 /// of an older build are not reused (10: keyframe work off the per-pair path, refreshes
 /// landing two frames late; 11: the paper's iteration restarted for oblique rays,
-/// `geolocation::iteration`, which changed one nadir run of 22 by one estimate).
-const RUN_FORMAT: u32 = 11;
+/// `geolocation::iteration`, which changed one nadir run of 22 by one estimate; 12: the
+/// temporal filter's start hypotheses at the meeting point's own prior, split where it
+/// curves, and the bias walk in the keyframes' yaws, `geolocation::start_prior`).
+const RUN_FORMAT: u32 = 12;
 /// The same for what changes only runs under correlated (Gauss–Markov) navigation
 /// errors: 9 = the temporal filter's tilt consider states and keyframe ageing, which
 /// exist only with a correlated-error block (white runs are bit-identical, checked on
-/// `default` seed 1); 10 and 11 with RUN_FORMAT.
-const CORRELATED_FORMAT: u32 = 11;
+/// `default` seed 1); 10, 11 and 12 with RUN_FORMAT.
+const CORRELATED_FORMAT: u32 = 12;
 
 /// The navigation-error models the Monte Carlo runs under.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize, clap::ValueEnum)]
