@@ -422,11 +422,15 @@ mod tests {
             // Seed 3: since that change the start picks a wrong bias hypothesis and is
             // 55 m off for 7 estimates (4.90–5.37 s), nearer the other red car than the
             // target: a gross start error the metric scores as of the look-alike (the
-            // Monte Carlo counts it gross too). A known regression (docs/monte-carlo.md),
-            // allowed at its measured size so that a worse one still fails here.
+            // Monte Carlo counts it gross too). Since the start hypotheses take the
+            // meeting point's own prior (`geolocation::start_prior`) the leader there is
+            // 18–20 m off (biases 22° off the same way) for 10 estimates (4.57–5.77 s),
+            // then re-acquires; over the scene's 8 seeds gross errors fell 8.1 → 5.4 %.
+            // A known regression (docs/monte-carlo.md), allowed at its measured size so
+            // that a worse one still fails here.
             let allowed = match *seed {
                 2 => 4,
-                3 => 7,
+                3 => 10,
                 _ => 0,
             };
             assert!(
