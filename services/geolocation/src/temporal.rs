@@ -1845,6 +1845,21 @@ mod tests {
         (sum / n as f64, gross as f64 / n as f64)
     }
 
+    /// A mean NEES inside its χ² `region` and at most 1 % of estimates beyond 3σ.
+    fn assert_calibrated(label: &str, nees: f64, gross: f64, region: (f64, f64)) {
+        eprintln!(
+            "{label}: mean NEES {nees:.2} (region {:.2}–{:.2}), beyond 3σ {:.1} %",
+            region.0,
+            region.1,
+            100.0 * gross
+        );
+        assert!(
+            (region.0..=region.1).contains(&nees),
+            "{label}: mean NEES {nees:.2} outside {region:?}"
+        );
+        assert!(gross <= 0.01, "{label}: {:.1} % beyond 3σ", 100.0 * gross);
+    }
+
     /// Issue #23: the start is honest from its first estimate. Each start hypothesis
     /// begins where the current pair's rays meet; its first update applied those rays
     /// again, and the first 1.5 s claimed more than they knew (48 runs 80 m up, 40 m
@@ -1919,17 +1934,7 @@ mod tests {
         assert_eq!(hypotheses.temporal.bias_hypotheses, 3);
         for (label, sc) in [("100 m", default), ("250 m", high)] {
             let (nees, gross) = calibration_with_keyframes(&sc, hypotheses, runs);
-            eprintln!(
-                "{label}: mean NEES {nees:.2} (region {:.2}–{:.2}), beyond 3σ {:.1} %",
-                region.0,
-                region.1,
-                100.0 * gross
-            );
-            assert!(
-                (region.0..=region.1).contains(&nees),
-                "{label}: mean NEES {nees:.2}"
-            );
-            assert!(gross <= 0.01, "{label}: {:.1} % beyond 3σ", 100.0 * gross);
+            assert_calibrated(label, nees, gross, region);
         }
         // One filter (`bias_hypotheses = 1`) on the 250 m flight: the failure above.
         let mut one = EstimatorConfig::default();
@@ -2012,17 +2017,7 @@ mod tests {
         let runs = 12;
         let region = (21.34 / runs as f64, 54.44 / runs as f64);
         let (nees, gross) = calibration_with_keyframes(&sc, EstimatorConfig::default(), runs);
-        eprintln!(
-            "45° ahead: mean NEES {nees:.2} (region {:.2}–{:.2}), beyond 3σ {:.1} %",
-            region.0,
-            region.1,
-            100.0 * gross
-        );
-        assert!(
-            (region.0..=region.1).contains(&nees),
-            "mean NEES {nees:.2} outside {region:?}"
-        );
-        assert!(gross <= 0.01, "{:.1} % beyond 3σ", 100.0 * gross);
+        assert_calibrated("45° ahead", nees, gross, region);
     }
 
     /// A cap on the start's hypotheses outside 1–400 is refused with the key's name.
