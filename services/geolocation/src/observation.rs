@@ -46,6 +46,24 @@ impl Observation {
             .yaw
     }
 
+    /// The pose with the bias `yaw_bias[uav]` and a pose error `e` (x, y, z, yaw, pitch,
+    /// roll; measured = true + e) removed: the filter's residuals and the start's
+    /// meeting point both see an image through it.
+    pub fn pose_without_error(&self, yaw_bias: [f64; 2], e: &[f64]) -> (Point3<f64>, Attitude) {
+        let mut att = self
+            .attitude
+            .corrected_for_yaw_bias(yaw_bias[self.uav.index()]);
+        att.yaw -= e[3];
+        att.pitch -= e[4];
+        att.roll -= e[5];
+        let position = Point3::new(
+            self.position.x - e[0],
+            self.position.y - e[1],
+            self.position.z - e[2],
+        );
+        (position, att)
+    }
+
     /// Checks that every number is finite and the intrinsics are usable.
     pub fn validate(&self, index: usize) -> Result<(), EstimatorError> {
         let finite = |ok: bool, what| {

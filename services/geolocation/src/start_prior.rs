@@ -115,12 +115,9 @@ fn meet(
     let ray = |i: usize| {
         let o = current[i];
         let mut moved = *o;
-        let mut att = o.attitude.corrected_for_yaw_bias(bias[o.uav.index()]);
-        att.yaw -= e[i][3];
-        att.pitch -= e[i][4];
-        att.roll -= e[i][5];
+        let (position, att) = o.pose_without_error(bias, &e[i]);
+        moved.position = position;
         moved.attitude = att;
-        moved.position -= Vector3::new(e[i][0], e[i][1], e[i][2]);
         moved.pixel += Vector2::new(px[i][0], px[i][1]);
         let direction = crate::ground_model::PreparedRay::new(&moved).direction(att.yaw);
         (moved.position, direction)

@@ -283,16 +283,8 @@ fn ray_residual(
     e: &[f64],
     offset: Option<[f64; 2]>,
 ) -> Option<nalgebra::Vector2<f64>> {
-    let bias = th[3 + o.uav.index()];
-    let mut att = o.attitude.corrected_for_yaw_bias(bias);
-    att.yaw -= e[3];
-    att.pitch -= e[4];
-    att.roll -= e[5];
-    let pos = [
-        o.position.x - e[0],
-        o.position.y - e[1],
-        o.position.z - e[2],
-    ];
+    let (position, att) = o.pose_without_error([th[3], th[4]], e);
+    let pos = [position.x, position.y, position.z];
     let p = Point3::new(th[0], th[1], th[2]);
     let [du, dv] = offset.unwrap_or([0.0; 2]);
     Some(reproject(o, pos, att, &p)? - o.pixel + nalgebra::Vector2::new(du, dv))
