@@ -1979,14 +1979,7 @@ mod tests {
         // χ²(72) at 2.5 % and 97.5 %: 51.0 and 96.6, over 24 runs.
         let region = (51.0 / runs as f64, 96.6 / runs as f64);
         let (nees, gross) = calibration_with_keyframes(&sc, config, runs);
-        eprintln!(
-            "Gauss–Markov: mean NEES {nees:.2} (region {:.2}–{:.2}), beyond 3σ {:.1} %",
-            region.0,
-            region.1,
-            100.0 * gross
-        );
-        assert!((region.0..=region.1).contains(&nees), "mean NEES {nees:.2}");
-        assert!(gross <= 0.01, "{:.1} % beyond 3σ", 100.0 * gross);
+        assert_calibrated("Gauss–Markov", nees, gross, region);
     }
 
     /// Two cameras looking 45° ahead of nadir, trailing the vehicle by 100 m (the
