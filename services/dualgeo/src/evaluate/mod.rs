@@ -97,6 +97,11 @@ pub struct EvaluateArgs {
     /// OUT/multi-target-seeds/runs/ and reused.
     #[arg(long, conflicts_with_all = ["suite_only", "no_suite", "monte_carlo"])]
     pub multi_target: bool,
+    /// With --multi-target: keep each run's recording and `dualgeo run` output in
+    /// DIR/SCENE-SEED/{rec,run} (to replay, score or look at again) instead of a
+    /// scratch folder; every run is flown again (as with --fresh)
+    #[arg(long, value_name = "DIR", requires = "multi_target")]
+    pub keep_flights: Option<PathBuf>,
 }
 
 fn parse_crf(text: &str) -> Result<Option<u8>, String> {
@@ -345,7 +350,9 @@ pub fn run(args: &EvaluateArgs) -> Result<()> {
             duration_s: args.mc_duration_s,
             warm_up_s: 2.0,
             out: args.out.clone(),
-            reuse: !args.fresh,
+            // Kept flights must be flown: a kept score is not a flight.
+            reuse: !args.fresh && args.keep_flights.is_none(),
+            keep_flights: args.keep_flights.clone(),
         };
         let command = std::iter::once("dualgeo".to_string())
             .chain(std::env::args().skip(1))

@@ -18,7 +18,7 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 /// Bump when a change makes kept runs stale (the chain, the scorer, the seeding).
-const RUN_FORMAT: u32 = 4;
+const RUN_FORMAT: u32 = 5;
 
 /// What the evaluation runs.
 #[derive(Debug, Clone)]
@@ -31,6 +31,8 @@ pub struct Plan {
     pub warm_up_s: f64,
     pub out: PathBuf,
     pub reuse: bool,
+    /// Keep each run's recording and output in DIR/SCENE-SEED/ (else a scratch folder).
+    pub keep_flights: Option<PathBuf>,
 }
 
 /// One scored run, as kept in runs/.
@@ -79,8 +81,20 @@ fn fly(plan: &Plan, presets: &Presets, scene: &str, seed: u64) -> Result<RunScor
     }
     let frame_rate = config.frame_rate_hz;
     let duration_s = config.duration_s;
-    let work = tempfile::tempdir().context("a scratch folder")?;
-    let rec = work.path().join("rec");
+    let scratch = tempfile::tempdir().context("a scratch folder")?;
+    let work = match &plan.keep_flights {
+        Some(dir) => {
+            let kept = dir.join(format!("{scene}-{seed:03}"));
+            if kept.exists() {
+                std::fs::remove_dir_all(&kept)
+                    .with_context(|| format!("clear {}", kept.display()))?;
+            }
+            std::fs::create_dir_all(&kept).with_context(|| format!("create {}", kept.display()))?;
+            kept
+        }
+        None => scratch.path().to_path_buf(),
+    };
+    let rec = work.join("rec");
     let mut sim = Simulator::new(config)?;
     record(
         &mut sim,
@@ -89,7 +103,7 @@ fn fly(plan: &Plan, presets: &Presets, scene: &str, seed: u64) -> Result<RunScor
         ImageEncoding::Jpeg { quality: 95 },
         |_, _| {},
     )?;
-    let out = work.path().join("run");
+    let out = work.join("run");
     let exe = std::env::current_exe().context("the dualgeo executable")?;
     let status = std::process::Command::new(exe)
         .arg("run")

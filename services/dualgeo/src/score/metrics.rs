@@ -118,6 +118,16 @@ pub struct PerVehicle {
     pub tracks: Vec<u32>,
 }
 
+/// One CLEAR MOT identity switch: when, which vehicle, the track it last had and the
+/// one it has now (the list a reader needs to find the moment in a replay).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct IdSwitch {
+    pub t_s: f64,
+    pub vehicle: u32,
+    pub from_track: u32,
+    pub to_track: u32,
+}
+
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct MultiScore {
     pub pairs: u64,
@@ -128,6 +138,8 @@ pub struct MultiScore {
     pub clear: ClearMot,
     pub id: IdScores,
     pub vehicles: Vec<PerVehicle>,
+    /// Every identity switch, in time order (`clear.id_switches` of them).
+    pub switch_events: Vec<IdSwitch>,
 }
 
 fn horizontal(a: &[f64; 3], b: &[f64; 3]) -> f64 {
@@ -206,6 +218,7 @@ pub fn score(frames: &[Frame], params: Params) -> MultiScore {
     let mut within: BTreeMap<(u32, u32), u64> = BTreeMap::new();
     let (mut truth_total, mut est_total, mut dont_care) = (0u64, 0u64, 0u64);
     let mut vehicles: BTreeMap<u32, (PerVehicle, [f64; 3])> = BTreeMap::new();
+    let mut switch_events = Vec::new();
 
     for frame in frames {
         let est = scored_estimates(frame, t);
@@ -300,9 +313,15 @@ pub fn score(frames: &[Frame], params: Params) -> MultiScore {
             let track = est[e].id;
             clear.matches += 1;
             match_d_sum += d[g][e];
-            if last_track.get(&obj.id).is_some_and(|&last| last != track) {
+            if let Some(&last) = last_track.get(&obj.id).filter(|&&last| last != track) {
                 clear.id_switches += 1;
                 entry.0.id_switches += 1;
+                switch_events.push(IdSwitch {
+                    t_s: frame.t_s,
+                    vehicle: obj.id,
+                    from_track: last,
+                    to_track: track,
+                });
             }
             last_track.insert(obj.id, track);
             current.insert(obj.id, track);
@@ -381,6 +400,7 @@ pub fn score(frames: &[Frame], params: Params) -> MultiScore {
         clear,
         id,
         vehicles,
+        switch_events,
     }
 }
 
@@ -501,10 +521,13 @@ mod tests {
         let frames: Vec<Frame> = (0..10)
             .map(|k| {
                 let (a, b) = if k < 5 { (7, 8) } else { (8, 7) };
-                frame(
-                    vec![obj(0, 0.0, 0.0), obj(1, 0.0, 10.0)],
-                    vec![obj(a, 0.0, 0.0), obj(b, 0.0, 10.0)],
-                )
+                Frame {
+                    t_s: 0.1 * k as f64,
+                    ..frame(
+                        vec![obj(0, 0.0, 0.0), obj(1, 0.0, 10.0)],
+                        vec![obj(a, 0.0, 0.0), obj(b, 0.0, 10.0)],
+                    )
+                }
             })
             .collect();
         let s = score(&frames, Params::default());
@@ -513,6 +536,24 @@ mod tests {
         assert_eq!(s.id.idtp, 10);
         assert!((s.id.idf1 - 0.5).abs() < 1e-12);
         assert_eq!(s.vehicles[0].tracks, vec![7, 8]);
+        let at = frames[5].t_s;
+        assert_eq!(
+            s.switch_events,
+            vec![
+                IdSwitch {
+                    t_s: at,
+                    vehicle: 0,
+                    from_track: 7,
+                    to_track: 8
+                },
+                IdSwitch {
+                    t_s: at,
+                    vehicle: 1,
+                    from_track: 8,
+                    to_track: 7
+                },
+            ]
+        );
     }
 
     /// Losing a track and regaining it are half switches each; an absence from view

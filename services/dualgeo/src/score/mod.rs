@@ -158,5 +158,11 @@ pub fn table(r: &ScoreReport) -> String {
             }
         );
     }
+    for e in &s.switch_events {
+        out += &format!(
+            "identity switch at t = {:.2} s: vehicle {} from track {} to track {}\n",
+            e.t_s, e.vehicle, e.from_track, e.to_track
+        );
+    }
     out
 }
