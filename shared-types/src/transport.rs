@@ -62,6 +62,14 @@ pub const END_OF_STREAM_EVENT: usize = 1;
 
 /// Small-message services: queue depth per subscriber.
 pub const MESSAGE_SUBSCRIBER_BUFFER: usize = 8;
+/// Queue depth of the services downstream of `--rate max`'s flow control (matching
+/// acknowledges a pair once it is matched; geolocation and the supervisor run on
+/// unthrottled): `observations` and `estimates`. Eight was measured short: two
+/// replays run side by side on two cores lost one estimate each in 2 of 16 runs
+/// (the supervisor starved for eight estimates, ~130 ms), so track.csv differed by
+/// that pair. 64 is a second at the replay's pace: per subscriber ~62 KB of
+/// estimates, ~0.5 MB of observation sets.
+pub const SINK_SUBSCRIBER_BUFFER: usize = 64;
 pub const MESSAGE_MAX_SUBSCRIBERS: usize = 4;
 
 /// A stage that is woken by its producers.
@@ -216,7 +224,10 @@ impl Endpoint {
                 .publish_subscribe::<T>()
                 .max_publishers(1)
                 .max_subscribers(MESSAGE_MAX_SUBSCRIBERS)
-                .subscriber_max_buffer_size(MESSAGE_SUBSCRIBER_BUFFER)
+                .subscriber_max_buffer_size(match topic {
+                    Topic::Observations | Topic::Estimates => SINK_SUBSCRIBER_BUFFER,
+                    _ => MESSAGE_SUBSCRIBER_BUFFER,
+                })
                 .subscriber_max_borrowed_samples(2)
                 .history_size(0)
                 .enable_safe_overflow(true)
