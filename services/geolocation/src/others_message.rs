@@ -8,7 +8,7 @@
 //! Counters: `others_located`, `others_rejected.<kind>`, `others_no_biases` (a pair
 //! with other vehicles but no valid target estimate to take the biases from),
 //! `tracks_confirmed`, `tracks_deleted`, `tracks_tentative_dropped`,
-//! `tracks_reacquired`, `tracks_target_fixes`.
+//! `tracks_reacquired`, `tracks_reidentified`, `tracks_target_fixes`.
 
 use crate::shared_bias::{locate_with_biases, OtherFix, SharedBiases};
 use crate::tracks::{TrackQuality, Tracks};
@@ -93,6 +93,9 @@ fn locate_relative(
         covariance_xy: target_xy + fix.covariance_xy_given_biases,
         covariance_xy_given_biases: target_xy + fix.covariance_xy_given_biases,
         altitude_std_error_m: fix.altitude_std_error_m.hypot(msg.altitude_std_error_m),
+        colour_bgr: Some(std::array::from_fn(|c| {
+            (f64::from(other.bgr[0][c]) + f64::from(other.bgr[1][c])) / 2.0
+        })),
     })
 }
 
@@ -140,6 +143,7 @@ pub fn add_tracks(
         ("tracks_deleted", c.deleted),
         ("tracks_tentative_dropped", c.tentative_dropped),
         ("tracks_reacquired", c.reacquired),
+        ("tracks_reidentified", c.reidentified),
         ("tracks_target_fixes", c.target_fixes),
     ] {
         if n > 0 {

@@ -39,6 +39,9 @@ pub struct OtherFix {
     pub covariance_xy_given_biases: Matrix2<f64>,
     /// Standard error of z (eq. 22 residuals), metres.
     pub altitude_std_error_m: f64,
+    /// Its colour (BGR, the two views' mean), when known: appearance for
+    /// re-identification.
+    pub colour_bgr: Option<[f64; 3]>,
 }
 
 /// Smallest bias variance used, rad² (0.01°): keeps the prior's information finite
@@ -114,6 +117,7 @@ pub fn locate_with_biases(
         covariance_xy: pxx,
         covariance_xy_given_biases: given_biases,
         altitude_std_error_m: altitude.std_error_m,
+        colour_bgr: None,
     };
     let finite = fix.position.iter().all(|v| v.is_finite())
         && fix.covariance_xy.iter().all(|v| v.is_finite())

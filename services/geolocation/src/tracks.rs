@@ -61,6 +61,9 @@ pub struct TrackConfig {
     /// A track is reported once its speed has reached this, m/s (0: every confirmed
     /// track, parked cars too).
     pub min_speed_mps: f64,
+    /// A deleted track is remembered this long, s (0: never): a new track of its
+    /// colour where it could have driven takes its id back (re-identification).
+    pub reid_after_s: f64,
 }
 
 impl Default for TrackConfig {
@@ -77,6 +80,7 @@ impl Default for TrackConfig {
             target_exclusion_m: 2.0,
             max_tracks: 8,
             min_speed_mps: 1.0,
+            reid_after_s: 10.0,
         }
     }
 }
@@ -95,6 +99,8 @@ impl TrackConfig {
             && self.target_exclusion_m >= 0.0
             && self.min_speed_mps.is_finite()
             && self.min_speed_mps >= 0.0
+            && self.reid_after_s.is_finite()
+            && self.reid_after_s >= 0.0
             && (1..=32).contains(&self.confirm_window)
             && (1..=self.confirm_window).contains(&self.confirm_hits)
             && self.max_tracks <= shared_types::messages::MAX_TRACKS
@@ -105,7 +111,7 @@ impl TrackConfig {
             Err(format!(
                 "[tracks]: need 1 <= confirm_hits <= confirm_window <= 32, max_tracks <= {}, \
                  positive finite times, sigmas and gate (gate_chi2 <= 1e6), \
-                 target_exclusion_m >= 0, min_speed_mps >= 0: {self:?}",
+                 target_exclusion_m >= 0, min_speed_mps >= 0, reid_after_s >= 0: {self:?}",
                 shared_types::messages::MAX_TRACKS
             ))
         }
@@ -149,6 +155,8 @@ pub struct TrackCounts {
     pub target_fixes: u64,
     /// Confirmed tracks that took a fix again after coasting.
     pub reacquired: u64,
+    /// New tracks that took a deleted track's id back.
+    pub reidentified: u64,
 }
 
 #[derive(Debug, Clone, PartialEq)]
@@ -169,13 +177,42 @@ struct Track {
     updated: bool,
     /// It has been seen moving (reported from then on).
     moved: bool,
+    /// Running mean of its fixes' colours (BGR), when they have one. Not in the
+    /// checkpoint: a restored track learns it again from its next fixes.
+    colour: Option<[f64; 3]>,
 }
+
+/// A deleted track, remembered `reid_after_s` for re-identification.
+#[derive(Debug, Clone, PartialEq)]
+struct Lost {
+    id: u32,
+    /// (x, y) and (v_east, v_north) at its last fix.
+    position: Vector2<f64>,
+    velocity: Vector2<f64>,
+    last_fix_s: f64,
+    colour: [f64; 3],
+    moved: bool,
+}
+
+/// Most a re-identified vehicle's colour may differ from the lost track's, per
+/// channel (BGR): matching's cross-view colour gate.
+const REID_COLOUR_GATE: f64 = 60.0;
+/// Slack of the re-identification region, m, and its growth with the gap, m/s: the
+/// region is every point within this of the lost track's path at 0 to its last speed
+/// along its last heading (a vehicle that stopped, slowed, kept on, or turned).
+const REID_SLACK_M: f64 = 10.0;
+const REID_SLACK_MPS: f64 = 1.0;
+/// Weight of a new fix's colour in a track's running mean.
+const COLOUR_ALPHA: f64 = 0.1;
 
 /// Every other vehicle's track.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Tracks {
     config: TrackConfig,
     tracks: Vec<Track>,
+    /// Deleted tracks still remembered (not checkpointed: after a restart a vehicle
+    /// gone before it gets a new id).
+    lost: Vec<Lost>,
     next_id: u32,
     counts: TrackCounts,
     /// How much the fixes' stated covariance R is scaled, learnt from the confirmed
@@ -228,6 +265,7 @@ impl Tracks {
         Ok(Self {
             config,
             tracks: Vec::new(),
+            lost: Vec::new(),
             next_id: 1,
             counts: TrackCounts::default(),
             noise_scale: 1.0,
@@ -240,6 +278,7 @@ impl Tracks {
     /// noise scale, a property of the fixes and not of the scene, is kept.
     pub fn start_over(&mut self) {
         self.tracks.clear();
+        self.lost.clear();
     }
 
     pub fn take_counts(&mut self) -> TrackCounts {
@@ -322,6 +361,7 @@ impl Tracks {
                 pairs: t.pairs,
                 updated: false,
                 moved: t.moved,
+                colour: None,
             });
         }
         tracks.next_id = snap.next_id;
@@ -450,6 +490,7 @@ impl Tracks {
                 pairs: 0,
                 updated: true,
                 moved: false,
+                colour: f.colour_bgr,
             });
         }
         // Birth and deletion.
@@ -460,14 +501,23 @@ impl Tracks {
         };
         let mut counts = self.counts;
         let mut next_id = self.next_id;
+        self.lost.retain(|l| t_s - l.last_fix_s <= c.reid_after_s);
+        let lost = &mut self.lost;
+        let mut deleted = Vec::new();
         self.tracks.retain_mut(|t| {
             if t.id == 0 {
                 t.hits = ((t.hits << 1) | u32::from(t.updated)) & window_mask;
                 t.pairs = t.pairs.saturating_add(1);
                 if t.hits.count_ones() >= c.confirm_hits {
-                    t.id = next_id;
-                    next_id = next_id.saturating_add(1);
                     counts.confirmed += 1;
+                    if let Some(old) = reidentify(lost, t, t_s) {
+                        t.id = old.id;
+                        t.moved = old.moved;
+                        counts.reidentified += 1;
+                    } else {
+                        t.id = next_id;
+                        next_id = next_id.saturating_add(1);
+                    }
                     return true;
                 }
                 let keep = t.pairs < c.confirm_window;
@@ -477,8 +527,22 @@ impl Tracks {
             let sigma = (t.p[(0, 0)] + t.p[(1, 1)]).sqrt();
             let keep = t_s - t.last_fix_s <= c.delete_after_s && sigma <= c.delete_sigma_m;
             counts.deleted += u64::from(!keep);
+            if let (false, Some(colour), true) = (keep, t.colour, c.reid_after_s > 0.0) {
+                // Its state at its last fix (it has coasted at constant velocity since).
+                let velocity = Vector2::new(t.x[2], t.x[3]);
+                let since = t.t_s - t.last_fix_s;
+                deleted.push(Lost {
+                    id: t.id,
+                    position: Vector2::new(t.x[0], t.x[1]) - velocity * since,
+                    velocity,
+                    last_fix_s: t.last_fix_s,
+                    colour,
+                    moved: t.moved,
+                });
+            }
             keep
         });
+        self.lost.extend(deleted);
         self.counts = counts;
         self.next_id = next_id;
         for t in self.tracks.iter_mut().filter(|t| t.id != 0 && !t.moved) {
@@ -505,6 +569,38 @@ impl Tracks {
         out.truncate(c.max_tracks);
         out
     }
+}
+
+/// The deleted track `track` (newly confirmed) is, if any: of its colour, and within
+/// the region it could have reached since its last fix ([`REID_SLACK_M`]); of several,
+/// the one whose path passes nearest. It is taken out of `lost`.
+fn reidentify(lost: &mut Vec<Lost>, track: &Track, t_s: f64) -> Option<Lost> {
+    let colour = track.colour?;
+    let here = Vector2::new(track.x[0], track.x[1]);
+    let best = lost
+        .iter()
+        .enumerate()
+        .filter(|(_, l)| {
+            l.colour
+                .iter()
+                .zip(&colour)
+                .all(|(a, b)| (a - b).abs() <= REID_COLOUR_GATE)
+        })
+        .filter_map(|(i, l)| {
+            let gap = (t_s - l.last_fix_s).max(0.0);
+            // Distance from `here` to the segment last position → where it would be
+            // at its last velocity.
+            let reach = l.velocity * gap;
+            let along = if reach.norm_squared() > 0.0 {
+                ((here - l.position).dot(&reach) / reach.norm_squared()).clamp(0.0, 1.0)
+            } else {
+                0.0
+            };
+            let distance = (here - (l.position + reach * along)).norm();
+            (distance <= REID_SLACK_M + REID_SLACK_MPS * gap).then_some((i, distance))
+        })
+        .min_by(|a, b| a.1.total_cmp(&b.1))?;
+    Some(lost.swap_remove(best.0))
 }
 
 /// Whether `track` moves: speed at least `min_speed` and its velocity nonzero at 99 %
@@ -567,6 +663,12 @@ fn correct(track: &mut Track, fix: &OtherFix, r: Matrix2<f64>, t_s: f64) {
         track.z = z;
         track.z_var *= 1.0 - gain;
     }
+    if let Some(c) = fix.colour_bgr.filter(|c| c.iter().all(|v| v.is_finite())) {
+        track.colour = Some(match track.colour {
+            Some(mean) => std::array::from_fn(|k| mean[k] + COLOUR_ALPHA * (c[k] - mean[k])),
+            None => c,
+        });
+    }
     track.last_fix_s = t_s;
     track.updated = true;
 }
@@ -582,6 +684,7 @@ mod tests {
             covariance_xy: Matrix2::identity() * 0.04,
             covariance_xy_given_biases: Matrix2::identity() * 0.04,
             altitude_std_error_m: 0.5,
+            colour_bgr: Some([0.0, 200.0, 220.0]),
         }
     }
 
@@ -657,6 +760,51 @@ mod tests {
         assert_eq!(ids_seen.into_iter().collect::<Vec<_>>(), vec![1, 2]);
         let c = tracks.take_counts();
         assert_eq!((c.confirmed, c.deleted), (2, 0));
+    }
+
+    /// A yellow car at the image's edge is out of both views for 7 s, longer than
+    /// `delete_after_s`, slowing down meanwhile; its new track takes its id back. A
+    /// blue car appearing where it could have been does not; nor does the yellow one
+    /// once `reid_after_s` has passed.
+    #[test]
+    fn a_vehicle_back_after_its_track_was_deleted_gets_its_id_back() {
+        let yellow = |x: f64, y: f64| fix(x, y);
+        let blue = |x: f64, y: f64| OtherFix {
+            colour_bgr: Some([200.0, 80.0, 20.0]),
+            ..fix(x, y)
+        };
+        let run = |reid_after_s: f64, returning: &dyn Fn(f64, f64) -> OtherFix| {
+            let mut tracks = Tracks::new(TrackConfig {
+                reid_after_s,
+                ..TrackConfig::default()
+            })
+            .unwrap();
+            let mut ids = std::collections::BTreeSet::new();
+            for k in 0..(14.0 / DT) as usize {
+                let t = k as f64 * DT;
+                // 10 m/s for 3 s, hidden for 7 s while slowing to 6 m/s, then seen again.
+                let y = if t < 3.0 {
+                    10.0 * t
+                } else {
+                    30.0 + 8.0 * (t - 3.0)
+                };
+                let fixes = match t {
+                    t if t < 3.0 => vec![yellow(0.0, y)],
+                    t if t < 10.0 => vec![],
+                    _ => vec![returning(0.0, y)],
+                };
+                ids.extend(tracks.update(t, &fixes, None).iter().map(|r| r.id));
+            }
+            (ids.into_iter().collect::<Vec<_>>(), tracks.take_counts())
+        };
+        let (ids, c) = run(10.0, &yellow);
+        assert_eq!(ids, vec![1]);
+        assert_eq!((c.deleted, c.reidentified), (1, 1));
+        let (ids, c) = run(10.0, &blue);
+        assert_eq!(ids, vec![1, 2]);
+        assert_eq!(c.reidentified, 0);
+        let (ids, _) = run(5.0, &yellow);
+        assert_eq!(ids, vec![1, 2]);
     }
 
     /// A single stray fix never becomes a track; a vehicle gone for longer than
