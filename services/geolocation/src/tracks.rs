@@ -194,8 +194,8 @@ struct Lost {
     moved: bool,
 }
 
-/// Most a re-identified vehicle's colour may differ from the lost track's, per
-/// channel (BGR): matching's cross-view colour gate.
+/// Most a fix's colour may differ from its track's (and a re-identified vehicle's
+/// from the lost track's), per channel (BGR): matching's cross-view colour gate.
 const REID_COLOUR_GATE: f64 = 60.0;
 /// Slack of the re-identification region, m, and its growth with the gap, m/s: the
 /// region is every point within this of the lost track's path at 0 to its last speed
@@ -402,7 +402,12 @@ impl Tracks {
             let d2 = nu.dot(&(s.try_inverse()? * nu));
             d2.is_finite().then_some(d2)
         };
+        // A fix of another colour is another vehicle, however near (after a bridge,
+        // a red car's coasting track took the yellow car's fix beside it).
         let chi2 = |track: &Track, f: &OtherFix| -> Option<f64> {
+            if !same_colour(track.colour, f.colour_bgr) {
+                return None;
+            }
             mahalanobis(track, f, noise(f)).filter(|d2| *d2 <= c.gate_chi2)
         };
         // A confirmed track's fix beyond its gate, but within the gate of the fix's
@@ -413,6 +418,9 @@ impl Tracks {
         // Left to the tentative tracks, such a fix started a duplicate that took the
         // vehicle's next fixes: an identity switch.
         let wide_chi2 = |track: &Track, f: &OtherFix| -> Option<f64> {
+            if !same_colour(track.colour, f.colour_bgr) {
+                return None;
+            }
             mahalanobis(track, f, wide_noise(f)).filter(|d2| *d2 <= c.gate_chi2)
         };
         // Confirmed tracks take their fixes before tentative ones (a vehicle's track
@@ -571,6 +579,18 @@ impl Tracks {
     }
 }
 
+/// Whether a track of colour `a` may take a fix of colour `b`: either unknown, or
+/// within [`REID_COLOUR_GATE`] per channel.
+fn same_colour(a: Option<[f64; 3]>, b: Option<[f64; 3]>) -> bool {
+    match (a, b) {
+        (Some(a), Some(b)) => a
+            .iter()
+            .zip(&b)
+            .all(|(x, y)| (x - y).abs() <= REID_COLOUR_GATE),
+        _ => true,
+    }
+}
+
 /// The deleted track `track` (newly confirmed) is, if any: of its colour, and within
 /// the region it could have reached since its last fix ([`REID_SLACK_M`]); of several,
 /// the one whose path passes nearest. It is taken out of `lost`.
@@ -580,12 +600,7 @@ fn reidentify(lost: &mut Vec<Lost>, track: &Track, t_s: f64) -> Option<Lost> {
     let best = lost
         .iter()
         .enumerate()
-        .filter(|(_, l)| {
-            l.colour
-                .iter()
-                .zip(&colour)
-                .all(|(a, b)| (a - b).abs() <= REID_COLOUR_GATE)
-        })
+        .filter(|(_, l)| same_colour(Some(l.colour), Some(colour)))
         .filter_map(|(i, l)| {
             let gap = (t_s - l.last_fix_s).max(0.0);
             // Distance from `here` to the segment last position → where it would be
@@ -805,6 +820,36 @@ mod tests {
         assert_eq!(c.reidentified, 0);
         let (ids, _) = run(5.0, &yellow);
         assert_eq!(ids, vec![1, 2]);
+    }
+
+    /// A red car's track does not take a yellow car's fix 1.5 m from its prediction
+    /// (after a bridge the two come out side by side): it coasts, and the yellow car
+    /// starts a track of its own.
+    #[test]
+    fn a_fix_of_another_colour_is_another_vehicle() {
+        let mut tracks = Tracks::new(TrackConfig::default()).unwrap();
+        let red = |x: f64, y: f64| OtherFix {
+            colour_bgr: Some([30.0, 30.0, 210.0]),
+            ..fix(x, y)
+        };
+        for k in 0..30 {
+            let t = k as f64 * DT;
+            tracks.update(t, &[red(0.0, 10.0 * t)], None);
+        }
+        let mut seen = std::collections::BTreeMap::new();
+        for k in 30..45 {
+            let t = k as f64 * DT;
+            for r in tracks.update(t, &[fix(1.5, 10.0 * t)], None) {
+                seen.insert(r.id, (r.quality, r.position[0]));
+            }
+        }
+        let (quality, x) = seen[&1];
+        assert_eq!(quality, TrackQuality::Coasting, "{seen:?}");
+        assert!(x.abs() < 0.1, "{seen:?}");
+        assert!(
+            seen.keys().any(|id| *id > 1),
+            "the yellow car's own track: {seen:?}"
+        );
     }
 
     /// A single stray fix never becomes a track; a vehicle gone for longer than
