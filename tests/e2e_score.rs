@@ -155,6 +155,19 @@ fn a_multi_vehicle_scene_lists_every_moving_vehicle_and_scores_tracks_against_th
         &[],
     );
     assert_eq!(s["clear"]["id_switches"], 2);
+    // Each is listed: when, which vehicle, from which track to which.
+    let events = s["switch_events"].as_array().unwrap();
+    assert_eq!(events.len(), 2, "{events:?}");
+    for e in events {
+        let vehicle = e["vehicle"].as_u64().unwrap();
+        assert!(vehicle < 2, "{e:?}");
+        assert_eq!(e["from_track"].as_u64(), Some(vehicle), "{e:?}");
+        assert_eq!(e["to_track"].as_u64(), Some(1 - vehicle), "{e:?}");
+        assert!(
+            e["t_s"].as_f64().unwrap() > 0.99,
+            "frame 30 or later: {e:?}"
+        );
+    }
     assert!(s["id"]["idf1"].as_f64().unwrap() < 0.9);
     assert!(s["clear"]["mota"].as_f64().unwrap() < 1.0);
 
