@@ -193,6 +193,8 @@ fn run() -> Result<()> {
                 msg.published_ns,
             );
             publisher.send_copy(msg).context("publish estimate")?;
+            // Against the supervisor's count of those it received: `estimates_lost`.
+            stats.count("published", 1);
             wake_supervisor.notify().context("wake supervisor")?;
             last = Some((msg.pair_seq, msg.t_s, set_segment));
             if let Some(path) = &state_path {

@@ -11,7 +11,9 @@
 //!   service), `pairs_lost_in_restarts` and `recovery_ms` (death seen → estimates
 //!   resumed: count, p50, p99, max; null without restarts).
 //! - `counters.json`: every stage's counters (drops by cause, rejections by reason),
-//!   with `supervisor.restarts.<service>` and `supervisor.pairs_lost_in_restarts`.
+//!   with `supervisor.restarts.<service>`, `supervisor.pairs_lost_in_restarts` and,
+//!   when some were, `supervisor.estimates_lost` (published by geolocation, never
+//!   received: a queue overflowed).
 //! - `soak.csv`, `soak.png`: memory, descriptors and latency per `--sample-every-s`
 //!   (`soak.rs`), with the flatness verdict printed.
 //! - `restarts.csv`: one row per death (service, incarnation, status, and the
@@ -217,7 +219,18 @@ pub fn write_all(
         supervisor.count(&format!("restarts.{service}"), n);
     }
     supervisor.count("pairs_lost_in_restarts", c.supervision.pairs_lost());
-    let gathered = Gathered::load(stats_dir, &supervisor)?;
+    let mut gathered = Gathered::load(stats_dir, &supervisor)?;
+    // Estimates geolocation published that the supervisor never received (its queue
+    // overflowed while it was starved): track.csv lacks them.
+    let lost = gathered
+        .counter("geolocation", "published")
+        .saturating_sub(c.messages);
+    if lost > 0 {
+        eprintln!("{lost} estimates published by geolocation never reached the outputs (the supervisor fell behind)");
+        if let Some(s) = gathered.stages.get_mut("supervisor") {
+            s.count("estimates_lost", lost);
+        }
+    }
     let (truth_dir, frame_rate_hz, origin) = source_facts(args, stream_dir)?;
     let ok = read_back(&out.join("track.csv"))?;
     let others = read_other_tracks(&out.join("track.csv"))?;
