@@ -378,6 +378,7 @@ fn tracks_snapshot() -> geolocation::tracks::TracksSnapshot {
         covariance_xy: nalgebra::Matrix2::identity() * 0.25,
         covariance_xy_given_biases: nalgebra::Matrix2::identity() * 0.25,
         altitude_std_error_m: 0.5,
+        colour_bgr: None,
     };
     for k in 0..5 {
         tracks.update(k as f64 / 30.0, &[fix(0.0), fix(20.0)], None);
