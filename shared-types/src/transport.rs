@@ -62,14 +62,15 @@ pub const END_OF_STREAM_EVENT: usize = 1;
 
 /// Small-message services: queue depth per subscriber.
 pub const MESSAGE_SUBSCRIBER_BUFFER: usize = 8;
-/// Queue depth of the services downstream of `--rate max`'s flow control (matching
-/// acknowledges a pair once it is matched; geolocation and the supervisor run on
-/// unthrottled): `observations` and `estimates`. Eight was measured short: two
-/// replays run side by side on two cores lost one estimate each in 2 of 16 runs
-/// (the supervisor starved for eight estimates, ~130 ms), so track.csv differed by
-/// that pair. 64 is a second at the replay's pace: per subscriber ~62 KB of
-/// estimates, ~0.5 MB of observation sets.
-pub const SINK_SUBSCRIBER_BUFFER: usize = 64;
+/// Queue depth of `estimates`, whose consumers (the supervisor's outputs, MCAP,
+/// detection's gate) run unthrottled by `--rate max`'s flow control (matching
+/// acknowledges a pair once it is matched). Eight was measured short: two replays run
+/// side by side on two cores lost one estimate each at the starved supervisor in 2 of
+/// 16 runs, so track.csv lacked that pair. 64 is a second at the replay's pace, ~62 KB
+/// per subscriber. (`observations` stays at 8: 64 of its 8 KB sets let a backlog at
+/// the filter's start touch up to 0.5 MB more of geolocation's shared memory, which the
+/// soak test's flat-memory check saw as a 2.4 % rise of its floor.)
+pub const ESTIMATE_SUBSCRIBER_BUFFER: usize = 64;
 pub const MESSAGE_MAX_SUBSCRIBERS: usize = 4;
 
 /// A stage that is woken by its producers.
@@ -225,7 +226,7 @@ impl Endpoint {
                 .max_publishers(1)
                 .max_subscribers(MESSAGE_MAX_SUBSCRIBERS)
                 .subscriber_max_buffer_size(match topic {
-                    Topic::Observations | Topic::Estimates => SINK_SUBSCRIBER_BUFFER,
+                    Topic::Estimates => ESTIMATE_SUBSCRIBER_BUFFER,
                     _ => MESSAGE_SUBSCRIBER_BUFFER,
                 })
                 .subscriber_max_borrowed_samples(2)
