@@ -404,12 +404,13 @@ impl Tracks {
         };
         // A fix of another colour is another vehicle, however near (after a bridge,
         // a red car's coasting track took the yellow car's fix beside it).
-        let chi2 = |track: &Track, f: &OtherFix| -> Option<f64> {
-            if !same_colour(track.colour, f.colour_bgr) {
-                return None;
-            }
-            mahalanobis(track, f, noise(f)).filter(|d2| *d2 <= c.gate_chi2)
+        let gated = |track: &Track, f: &OtherFix, r: Matrix2<f64>| -> Option<f64> {
+            same_colour(track.colour, f.colour_bgr)
+                .then(|| mahalanobis(track, f, r))
+                .flatten()
+                .filter(|d2| *d2 <= c.gate_chi2)
         };
+        let chi2 = |track: &Track, f: &OtherFix| gated(track, f, noise(f));
         // A confirmed track's fix beyond its gate, but within the gate of the fix's
         // stated covariance unscaled (`wide_noise`), is still its own: a fix's error
         // is mostly small and white, with steps of 2–5 m when the past images it is
@@ -417,12 +418,7 @@ impl Tracks {
         // 1.2 at the learnt scale, yet fixes 3 m off in 6–26 % of a vehicle's pairs).
         // Left to the tentative tracks, such a fix started a duplicate that took the
         // vehicle's next fixes: an identity switch.
-        let wide_chi2 = |track: &Track, f: &OtherFix| -> Option<f64> {
-            if !same_colour(track.colour, f.colour_bgr) {
-                return None;
-            }
-            mahalanobis(track, f, wide_noise(f)).filter(|d2| *d2 <= c.gate_chi2)
-        };
+        let wide_chi2 = |track: &Track, f: &OtherFix| gated(track, f, wide_noise(f));
         // Confirmed tracks take their fixes before tentative ones (a vehicle's track
         // must not lose it to a newborn duplicate).
         let forbidden = c.gate_chi2 * (self.tracks.len() + 1) as f64 + 1.0;
