@@ -212,6 +212,11 @@ pub(crate) fn split_where_curved(
     cap: usize,
     curvature: impl Fn(&BiasStart) -> f64,
 ) -> Vec<BiasStart> {
+    if grid.len() + 8 > cap {
+        // No room for a split (the default 7 × 7 grid fills the cap): skip the
+        // curvature, ~80 ray-pair solves a component.
+        return grid;
+    }
     let mut bank: Vec<(BiasStart, usize, f64)> = grid
         .into_iter()
         .map(|g| {

@@ -35,13 +35,14 @@ pub const WARM_UP_S: f64 = 10.0;
 /// landing two frames late; 11: the paper's iteration restarted for oblique rays,
 /// `geolocation::iteration`, which changed one nadir run of 22 by one estimate; 12: the
 /// temporal filter's start hypotheses at the meeting point's own prior, split where it
-/// curves, and the bias walk in the keyframes' yaws, `geolocation::start_prior`).
-const RUN_FORMAT: u32 = 12;
+/// curves, and the bias walk in the keyframes' yaws, `geolocation::start_prior`; 13: the
+/// start's grid 7 × 7 instead of 3 × 3, `bias_hypotheses`).
+const RUN_FORMAT: u32 = 13;
 /// The same for what changes only runs under correlated (Gauss–Markov) navigation
 /// errors: 9 = the temporal filter's tilt consider states and keyframe ageing, which
 /// exist only with a correlated-error block (white runs are bit-identical, checked on
-/// `default` seed 1); 10, 11 and 12 with RUN_FORMAT.
-const CORRELATED_FORMAT: u32 = 12;
+/// `default` seed 1); 10 to 13 with RUN_FORMAT.
+const CORRELATED_FORMAT: u32 = 13;
 
 /// The navigation-error models the Monte Carlo runs under.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize, clap::ValueEnum)]
