@@ -427,11 +427,16 @@ mod tests {
             // meeting point's own prior (`geolocation::start_prior`) the leader there is
             // 18–20 m off (biases 22° off the same way) for 10 estimates (4.57–5.77 s),
             // then re-acquires; over the scene's 8 seeds gross errors fell 8.1 → 5.4 %.
+            // With the 7 × 7 start grid the same start (leader's biases 23° and 29° off
+            // the same way, 20–30 m off towards the other red car) is scored as of the
+            // look-alike from its first estimate: 17 estimates (4.57–6.03 s), where the
+            // 3 × 3 grid's first four were nearer the target. The grid cut every other
+            // scene's start errors (docs/temporal.md, "A finer start grid").
             // A known regression (docs/monte-carlo.md), allowed at its measured size so
             // that a worse one still fails here.
             let allowed = match *seed {
                 2 => 4,
-                3 => 10,
+                3 => 17,
                 _ => 0,
             };
             assert!(
