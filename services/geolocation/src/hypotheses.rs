@@ -10,10 +10,12 @@
 //! of the Monte Carlo: the altitude 17 m low for the whole run).
 //!
 //! What: the N(0, σ₀²) bias prior is split into a grid of `bias_hypotheses` per axis
-//! (3: means −30°, 0°, +30° per UAV, each with σ₀/3 = 15°), each one a whole filter
+//! (7, the default: σ₀/7 = 6.4° each, 12.9° apart; 3: means −30°, 0°, +30° per UAV,
+//! each with σ₀/3 = 15°), each one a whole filter
 //! (the same keyframe slots, its own state). Each starts where the current pair's two
 //! rays meet under its own biases, with that point's own covariance, and a component
-//! whose point curves within it is split into a finer grid (`start_prior.rs`). Every update weighs each hypothesis by the
+//! whose point curves within it is split into a finer grid while the bank has room
+//! (`start_prior.rs`). Every update weighs each hypothesis by the
 //! likelihood of its innovations; one far behind the leader is dropped, two that have
 //! come together are merged (moments matched), so the bank is one filter again within
 //! a few seconds. Until then the estimate is the leader's, its covariance the mixture's
@@ -21,8 +23,10 @@
 //! the Gaussian-sum filter of Alspach and Sorenson (1972), used only where the
 //! posterior is far from one Gaussian.
 //!
-//! `[estimator.temporal] bias_hypotheses` sets the grid (3, the default; 1 is one
-//! filter started at the window estimate, as before issue #23's last step). The
+//! `[estimator.temporal] bias_hypotheses` sets the grid (7, the default: a 15°
+//! component was still linearised across a curved fit, docs/temporal.md "A finer start
+//! grid"; 1 is one filter started at the window estimate, as before issue #23's last
+//! step). The
 //! honest mixture stays `converging` longer than one overconfident filter did, so
 //! detection gates with `converging` estimates too, the biases' σ widening the gate
 //! (`detection::prediction_gate`; docs/temporal.md).
