@@ -198,6 +198,16 @@ fn look_alikes(s: &SceneSummary, scored: bool) -> String {
     }
 }
 
+/// "mean ± standard error", or the mean alone where one run leaves no standard error
+/// (never a NaN in the report).
+fn mean_with_error(mean: f64, se: f64) -> String {
+    if se.is_finite() {
+        format!("{mean:+.2} ± {se:.2}")
+    } else {
+        format!("{mean:+.2} (one run)")
+    }
+}
+
 fn row(scene: &str, s: &SceneSummary, targets: Targets) -> String {
     let [mx, my, mz, mh] = s.mae_median;
     let accuracy = targets != Targets::CalibrationOnly;
@@ -212,7 +222,7 @@ fn row(scene: &str, s: &SceneSummary, targets: Targets) -> String {
         && (s.first_estimate_median_s > FIRST_ESTIMATE_MAX_S
             || s.h_acc_2m_median_s > H_ACC_2M_MAX_S);
     format!(
-        "| `{scene}` | {} | {:.1} %{} ({} not visible{}) | {mx:.2} / {my:.2} / {mz:.2}{} | {:.2} / {worst_h:.2} ({}){} | {:.2} / {:.2}{} | {:.0} / {:.0} %{} | {:.1} %{} | {:.1} ({:.1}–{:.1}){} | {:+.2} ± {:.2}{} | {} ({}) | {} / {}{} |",
+        "| `{scene}` | {} | {:.1} %{} ({} not visible{}) | {mx:.2} / {my:.2} / {mz:.2}{} | {:.2} / {worst_h:.2} ({}){} | {:.2} / {:.2}{} | {:.0} / {:.0} %{} | {:.1} %{} | {:.1} ({:.1}–{:.1}){} | {}{} | {} ({}) | {} / {}{} |",
         s.runs,
         s.located_pct,
         miss(s.located_pct < 90.0 || (accuracy && s.look_alike_estimates > 0)),
@@ -234,8 +244,7 @@ fn row(scene: &str, s: &SceneSummary, targets: Targets) -> String {
         s.nees_bounds[0],
         s.nees_bounds[1],
         miss(nees_miss),
-        s.mean_z_err_m,
-        s.mean_z_err_se_m,
+        mean_with_error(s.mean_z_err_m, s.mean_z_err_se_m),
         miss(s.mean_z_err_m.abs() > MEAN_Z_MAX_M.max(2.0 * s.mean_z_err_se_m)),
         secs(s.time_to_trust_median_s),
         secs(s.time_to_trust_worst_s),
@@ -294,4 +303,15 @@ pub fn json(all: &[SceneRuns]) -> serde_json::Value {
             "summary": s.summary,
         })).collect::<Vec<_>>(),
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn one_run_gives_no_nan_in_the_mean_z_cell() {
+        assert_eq!(mean_with_error(-2.094, f64::NAN), "-2.09 (one run)");
+        assert_eq!(mean_with_error(0.114, 0.142), "+0.11 ± 0.14");
+    }
 }
