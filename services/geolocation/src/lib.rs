@@ -33,6 +33,7 @@ pub mod others_message;
 pub mod regression;
 pub mod set_message;
 pub mod shared_bias;
+pub mod start_agreement;
 pub mod start_prior;
 pub mod synthetic;
 pub mod temporal;

@@ -50,7 +50,8 @@
 
 use crate::hypotheses::{bias_grid, prune_and_merge, spread_about, weights, BiasStart, Hypothesis};
 use crate::joint::{reproject, Theta};
-use crate::start_prior::{meeting_prior, split_where_curved, ImageNoise};
+use crate::start_agreement::{agree, StartCandidate, START_CONSENSUS};
+use crate::start_prior::{meeting_prior, split_where_curved, ImageNoise, MeetingPrior};
 use crate::{Estimate, EstimatorConfig, EstimatorError, Observation, PastImage};
 use nalgebra::{DMatrix, DVector, Matrix4, Point3, SMatrix, SVector};
 use shared_types::conventions::Uav;
@@ -240,14 +241,9 @@ pub struct TemporalEstimator {
     /// The hypotheses (`hypotheses.rs`), leader first: none before the start, several
     /// while the start's bias hypotheses are open, then one.
     pub(crate) bank: Vec<Hypothesis>,
-    /// Before the start: the last plausible window estimates (t, position).
-    pub(crate) start_candidates: Vec<(f64, Point3<f64>)>,
+    /// Before the start: the last sets' candidates (`start_agreement.rs`).
+    pub(crate) start_candidates: Vec<StartCandidate>,
 }
-
-/// Window estimates that must agree before the filter starts.
-const START_CONSENSUS: usize = 3;
-/// How far a target can drive between two of them, m/s (the agreement's allowance).
-const START_MAX_SPEED_MPS: f64 = 20.0;
 
 /// Core states: x, y, z, v_x, v_y, δψ_L, δψ_R ...
 const CORE: usize = 7;
@@ -336,53 +332,51 @@ impl TemporalEstimator {
         self.bank.len()
     }
 
-    /// Whether the filter may start from `window` at `t_s`: the window estimate must be
-    /// plausible (below both current cameras, both biases within twice the start's
-    /// σ, at least 45°) and agree with the previous [`START_CONSENSUS`] − 1 plausible ones (within
-    /// twice the start's position σ plus what a target can drive in between). One
-    /// set that pairs the target in one camera with a look-alike in the other gives a
-    /// window estimate hundreds of metres off (`suite_traffic`); the filter started
-    /// there with σ 15 m and never came back.
-    fn agree_on_start(
+    /// Whether the filter may start at `t_s`: the last [`START_CONSENSUS`] sets must
+    /// agree (`start_agreement.rs`): each camera's target ray moving smoothly from set
+    /// to set, and the plausible window estimates among them within twice the start's
+    /// position σ plus what a target can drive in between. A window estimate is
+    /// plausible below both current cameras with both biases within twice the start's
+    /// σ (at least 45°); an implausible one, or none, leaves only the rays to agree.
+    /// One set that pairs the target in one camera with a look-alike in the other gives
+    /// a window estimate hundreds of metres off (`suite_traffic`); the filter started
+    /// there with σ 15 m and never came back. Returns the window estimate to start
+    /// from, when it is plausible.
+    fn agree_on_start<'w>(
         &mut self,
         t_s: f64,
         current: [&Observation; 2],
-        window: &Estimate,
-    ) -> Result<(), EstimatorError> {
+        window: Option<&'w Estimate>,
+    ) -> Result<Option<&'w Estimate>, EstimatorError> {
         let tc = self.config.temporal;
-        let p = window.position;
         let bias_limit = (2.0 * tc.initial_bias_sigma_deg).max(45.0).to_radians();
-        let plausible = p.iter().all(|v| v.is_finite())
-            && window.yaw_bias.iter().all(|b| b.abs() <= bias_limit)
-            && current.iter().all(|o| p.z < o.position.z);
-        if !plausible {
-            return Err(EstimatorError::NotStarted {
-                reason: "implausible window estimate",
-            });
-        }
-        self.start_candidates.push((t_s, p));
+        let window = window.filter(|w| {
+            let p = w.position;
+            p.iter().all(|v| v.is_finite())
+                && w.yaw_bias.iter().all(|b| b.abs() <= bias_limit)
+                && current.iter().all(|o| p.z < o.position.z)
+        });
+        self.start_candidates.push(StartCandidate::new(
+            t_s,
+            current,
+            window.map(|w| w.position),
+        ));
         if self.start_candidates.len() > START_CONSENSUS {
             self.start_candidates.remove(0);
         }
-        let tolerance =
-            |dt: f64| 2.0 * tc.initial_position_sigma_m + START_MAX_SPEED_MPS * dt.abs();
-        let agree = self.start_candidates.iter().all(|(ti, pi)| {
-            self.start_candidates
-                .iter()
-                .all(|(tj, pj)| (pi - pj).norm() <= tolerance(ti - tj))
-        });
-        match (self.start_candidates.len() == START_CONSENSUS, agree) {
-            (true, true) => Ok(()),
+        let agreed = agree(&self.start_candidates, tc.initial_position_sigma_m);
+        match (self.start_candidates.len() == START_CONSENSUS, agreed) {
+            (true, true) => Ok(window),
             (_, false) => {
                 // Keep the newest: the others disagree with it or with each other.
                 self.start_candidates
                     .drain(..self.start_candidates.len() - 1);
                 Err(EstimatorError::NotStarted {
-                    reason: "window estimates disagree",
+                    reason: "the start's sets disagree",
                 })
             }
             (false, true) => Err(EstimatorError::NotStarted {
-                reason: "waiting for agreeing window estimates",
+                reason: "waiting for agreeing sets",
             }),
         }
     }
@@ -563,15 +557,28 @@ impl TemporalEstimator {
         }
         let starting = self.bank.is_empty();
         if starting {
-            // Start from the window estimate (never from truth), once several agree.
-            let w = window.ok_or(EstimatorError::TooFewImages {
-                needed: 3,
-                left: 1,
-                right: 1,
-            })?;
-            self.agree_on_start(t_s, current, w)?;
+            // Start once several sets agree (never from truth). The window estimate is
+            // not needed: each hypothesis starts where the current rays meet under its
+            // biases; the paper's window is what fails first when the biases are large
+            // and the cameras look ahead (`gimbal`: no start for 19.6 s of a 20 s run,
+            // docs/temporal.md "A start without the window").
+            // Without a window estimate, not before matching has past images of both
+            // UAVs: the current pair alone says nothing of the biases, and a bank
+            // started on it alone was 600 m off on `gimbal` seed 8 and never came back.
+            let past_of = |uav: Uav| past.iter().any(|p| p.observation.uav == uav);
+            if window.is_none() && !(past_of(Uav::Left) && past_of(Uav::Right)) {
+                return Err(EstimatorError::NotStarted {
+                    reason: "no window estimate and no past image of each UAV",
+                });
+            }
+            let w = self.agree_on_start(t_s, current, window)?;
             self.start_candidates.clear();
             self.bank = self.start(t_s, current, w);
+            if self.bank.is_empty() {
+                return Err(EstimatorError::NotStarted {
+                    reason: "without a window estimate the current rays meet under none of the start's biases",
+                });
+            }
         }
         let mut kept = Vec::with_capacity(self.bank.len());
         let mut outs = Vec::with_capacity(self.bank.len());
@@ -602,9 +609,15 @@ impl TemporalEstimator {
     /// rays meet under its own biases, with that meeting point's covariance
     /// ([`meeting_prior`]), the grid split where that point curves
     /// ([`split_where_curved`]); the window estimate's position with the start's
-    /// position σ when they do not meet in front of both cameras. A single filter
-    /// starts at the window estimate.
-    fn start(&self, t_s: f64, current: [&Observation; 2], window: &Estimate) -> Vec<Hypothesis> {
+    /// position σ when they do not meet in front of both cameras (without a window
+    /// estimate, that hypothesis is not started). A single filter starts at the window
+    /// estimate (none without one).
+    fn start(
+        &self,
+        t_s: f64,
+        current: [&Observation; 2],
+        window: Option<&Estimate>,
+    ) -> Vec<Hypothesis> {
         let tc = self.config.temporal;
         let (sp, sv) = (tc.initial_position_sigma_m, tc.initial_velocity_sigma_mps);
         let min_angle = self.config.min_ray_angle_deg.to_radians();
@@ -626,7 +639,7 @@ impl TemporalEstimator {
             grid
         };
         grid.into_iter()
-            .map(|g| {
+            .filter_map(|g| {
                 let mut s = DVector::zeros(self.core_len());
                 s[5] = g.mean[0];
                 s[6] = g.mean[1];
@@ -648,8 +661,15 @@ impl TemporalEstimator {
                 // A hypothesis starts where the current pair's rays meet under its
                 // biases: its position's covariance, and its covariance with the biases
                 // and correlated pose errors it moves with, are theirs (`start_prior`).
-                // Where they do not meet, at the window estimate with the start's σ.
-                let meeting = (tc.bias_hypotheses > 1).then(|| prior(&g)).flatten();
+                // Where they do not meet, at the window estimate with the start's σ
+                // (without one, not started).
+                // A meeting point above either camera is not one (near-parallel rays
+                // turned past each other by the biases).
+                let below = |m: &MeetingPrior| current.iter().all(|o| m.point.z < o.position.z);
+                let meeting = (tc.bias_hypotheses > 1)
+                    .then(|| prior(&g))
+                    .flatten()
+                    .filter(below);
                 let position = match meeting {
                     Some(m) => {
                         p.view_mut((0, 0), (3, 3))
@@ -665,19 +685,19 @@ impl TemporalEstimator {
                         }
                         m.point
                     }
-                    None => window.position,
+                    None => window?.position,
                 };
                 s[0] = position.x;
                 s[1] = position.y;
                 s[2] = position.z;
-                Hypothesis {
+                Some(Hypothesis {
                     log_weight: g.log_weight,
                     state: (t_s, s, p),
                     slots: Vec::new(),
                     drift: [nalgebra::Vector2::zeros(); 2],
                     since_reopen: REOPEN_HOLD,
                     lost_since_s: None,
-                }
+                })
             })
             .collect()
     }
@@ -1360,6 +1380,56 @@ mod tests {
         assert!(nees < 13.8, "{d:?}: NEES {nees:.1}");
     }
 
+    /// Without window estimates (the paper's window failed: tilted cameras, large
+    /// biases), and not on the current pair alone, the filter starts once three sets
+    /// with past images of both UAVs have rays that agree, where the current rays
+    /// meet under its hypotheses' biases, and states an accuracy that covers its
+    /// error; a set whose right camera took a vehicle far away holds the start back.
+    #[test]
+    fn the_filter_starts_without_window_estimates_when_the_rays_agree() {
+        let scenario = SyntheticScenario::default();
+        let mut rng = rand::rngs::StdRng::seed_from_u64(9);
+        let mut f = TemporalEstimator::new(EstimatorConfig::default()).unwrap();
+        let trial = |t: f64, rng: &mut rand::rngs::StdRng| scenario.trial(t, 2, rng).unwrap();
+        let lag = scenario.keyframe_interval_s();
+        // Not on the current pair alone.
+        let tr = trial(4.9, &mut rng);
+        let o = &tr.observations;
+        let e = f.update(4.9, [&o[0], &o[1]], &[], None);
+        assert!(matches!(e, Err(EstimatorError::NotStarted { .. })), "{e:?}");
+        // A right detection 150 px away (another vehicle) in the second set.
+        let mut started = None;
+        for k in 0..6 {
+            let t = 5.0 + k as f64 / 15.0;
+            let tr = trial(t, &mut rng);
+            let mut o = tr.observations.clone();
+            if k == 1 {
+                o[1].pixel.x += 150.0;
+            }
+            // One past image of each UAV (the trial's order: L, R now, then L, R earlier).
+            let past: Vec<PastImage> = o[2..]
+                .iter()
+                .map(|ob| past_image((ob.uav, 100 + k as u64), t - lag, *ob))
+                .collect();
+            match f.update(t, [&o[0], &o[1]], &past, None) {
+                Ok(e) => {
+                    started = Some((k, e, tr.target));
+                    break;
+                }
+                Err(e) => assert!(matches!(e, EstimatorError::NotStarted { .. }), "{e:?}"),
+            }
+        }
+        let (k, e, target) = started.expect("started without window estimates");
+        // Sets 0 and 1 disagree; 1, 2 and 3 too (the jump); 2, 3 and 4 agree.
+        assert_eq!(k, 4, "the third agreeing set after the jump starts it");
+        let (nees, beyond) = nees_of(&e, target);
+        assert!(
+            !beyond,
+            "NEES {nees:.1}: {:?}",
+            e.estimate.position - target
+        );
+    }
+
     /// NEES over x, y (their 2×2 covariance) and z (v_acc) of one estimate, and whether
     /// it is beyond 3σ (horizontal beyond 3 h_acc or vertical beyond 3 v_acc).
     fn nees_of(e: &TemporalEstimate, truth: Point3<f64>) -> (f64, bool) {
@@ -1533,7 +1603,7 @@ mod tests {
         let mut f = TemporalEstimator::new(EstimatorConfig::default()).unwrap();
         assert!(
             f.update(10.0, [&o[0], &o[1]], &[], None).is_err(),
-            "cannot start without a window estimate"
+            "cannot start without a window estimate or past images"
         );
         // It starts once three window estimates agree.
         for t in [10.0, 10.1] {

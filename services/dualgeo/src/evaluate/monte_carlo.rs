@@ -36,13 +36,14 @@ pub const WARM_UP_S: f64 = 10.0;
 /// `geolocation::iteration`, which changed one nadir run of 22 by one estimate; 12: the
 /// temporal filter's start hypotheses at the meeting point's own prior, split where it
 /// curves, and the bias walk in the keyframes' yaws, `geolocation::start_prior`; 13: the
-/// start's grid 7 × 7 instead of 3 × 3, `bias_hypotheses`).
-const RUN_FORMAT: u32 = 13;
+/// start's grid 7 × 7 instead of 3 × 3, `bias_hypotheses`; 14: the start without the
+/// paper's window estimate, `geolocation::start_agreement`).
+const RUN_FORMAT: u32 = 14;
 /// The same for what changes only runs under correlated (Gauss–Markov) navigation
 /// errors: 9 = the temporal filter's tilt consider states and keyframe ageing, which
 /// exist only with a correlated-error block (white runs are bit-identical, checked on
-/// `default` seed 1); 10 to 13 with RUN_FORMAT.
-const CORRELATED_FORMAT: u32 = 13;
+/// `default` seed 1); 10 to 14 with RUN_FORMAT.
+const CORRELATED_FORMAT: u32 = 14;
 
 /// The navigation-error models the Monte Carlo runs under.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize, clap::ValueEnum)]
