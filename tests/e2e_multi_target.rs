@@ -83,7 +83,7 @@ fn the_second_red_car_gets_a_track_of_its_own_and_the_target_is_untouched() {
     };
     // The colour detector sees the red cars (the target, track 0, and the second red
     // car, which gets a track of its own, never track 0) and, as other colours, the
-    // blue and yellow ones; the white one has no hue to find it by.
+    // blue and yellow ones, and the white one by its brightness (`whites`).
     let target = vehicle(0);
     assert!(target["located_share"].as_f64().unwrap() > 0.9, "{target}");
     assert_eq!(target["tracks"], serde_json::json!([0]), "{target}");
@@ -106,10 +106,11 @@ fn the_second_red_car_gets_a_track_of_its_own_and_the_target_is_untouched() {
         share > 0.4,
         "the blue car located in {share} of its pairs: {blue}"
     );
-    assert_eq!(
-        vehicle(3)["located_share"].as_f64(),
-        Some(0.0),
-        "the white car"
+    let white = vehicle(3);
+    let share = white["located_share"].as_f64().unwrap();
+    assert!(
+        share > 0.4,
+        "the white car located in {share} of its pairs: {white}"
     );
     let geo = json(&std::path::Path::new(&out).join("stats/geolocation.0.json"));
     let counters = &geo["counters"];

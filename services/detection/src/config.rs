@@ -16,6 +16,8 @@
 //!
 //! [detection.others]       # other vehicles' colours (several targets); defaults:
 //! saturation_min = 150     # every vivid hue the target's hue_ranges leave
+//! whites = true            # and white vehicles: value >= 200, saturation <= 40,
+//! white_min_width_px = 6   # strokes narrower than 6 px (road markings) left out
 //! ```
 //!
 //! Unknown keys are refused at every level, as everywhere in the configuration.
@@ -167,11 +169,22 @@ mod tests {
             "[detection.others]
 hue_ranges = [[100, 130]]
 min_area_px = 50
+whites = false
 ",
         )
         .unwrap();
         assert_eq!(c.others.hue_ranges, Some(vec![[100, 130]]));
         assert_eq!(c.others.min_area_px, 50);
+        assert!(!c.others.whites);
+        assert!(
+            parse(
+                "[detection.others]
+"
+            )
+            .unwrap()
+            .others
+            .whites
+        );
         for (bad, says) in [
             (
                 "[detection.others]
@@ -190,6 +203,12 @@ saturation = 3
 max_area_px = 1
 ",
                 "max_area_px",
+            ),
+            (
+                "[detection.others]
+white_min_width_px = 0
+",
+                "white_min_width_px",
             ),
         ] {
             let e = parse(bad).unwrap_err();

@@ -4,6 +4,7 @@
 //! so nothing is allocated per frame once they have their size.
 
 use opencv::core as cv;
+use opencv::prelude::*;
 
 /// An HSV image and the buffers of its thresholds and components (as OpenCV's
 /// `connected_components_with_stats` fills `labels`, `stats` and `centroids`).
@@ -28,6 +29,22 @@ impl Scratch {
         saturation_min: f64,
         value_min: f64,
     ) -> opencv::Result<i32> {
+        self.threshold(hues, saturation_min, value_min)?;
+        self.components()
+    }
+
+    /// `mask` = the pixels of `hsv` in the hue intervals `hues` with saturation and value
+    /// at least `saturation_min` and `value_min` (all zero when `hues` is empty).
+    pub fn threshold(
+        &mut self,
+        hues: &[[u8; 2]],
+        saturation_min: f64,
+        value_min: f64,
+    ) -> opencv::Result<()> {
+        if hues.is_empty() {
+            self.mask = cv::Mat::zeros(self.hsv.rows(), self.hsv.cols(), cv::CV_8UC1)?.to_mat()?;
+            return Ok(());
+        }
         for (i, [lo, hi]) in hues.iter().enumerate() {
             let low = cv::Scalar::new(*lo as f64, saturation_min, value_min, 0.0);
             let high = cv::Scalar::new(*hi as f64, 255.0, 255.0, 0.0);
@@ -39,6 +56,19 @@ impl Scratch {
                 std::mem::swap(&mut self.mask, &mut self.combined);
             }
         }
+        Ok(())
+    }
+
+    /// `mask` |= `extra` (same size, 8-bit).
+    pub fn add_to_mask(&mut self, extra: &cv::Mat) -> opencv::Result<()> {
+        cv::bitwise_or_def(&self.mask, extra, &mut self.combined)?;
+        std::mem::swap(&mut self.mask, &mut self.combined);
+        Ok(())
+    }
+
+    /// Labels the 8-connected components of `mask`. Returns the number of labels (0 is
+    /// the background).
+    pub fn components(&mut self) -> opencv::Result<i32> {
         opencv::imgproc::connected_components_with_stats(
             &self.mask,
             &mut self.labels,

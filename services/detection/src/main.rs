@@ -24,8 +24,8 @@
 //! on its own thread). With `kind = "motion"` (`detection::motion`): `movers` (blobs
 //! moving against the ground, summed over frames), `no_ground` (frames whose ground
 //! motion was not measured), `acquired` and `track_lost`. With `[detection] candidates`
-//! (default; the colour detector adds every blob of another vivid colour,
-//! `[detection.others]`): `candidates` (other objects published beside the target, summed over
+//! (default; the colour detector adds every blob of another vivid colour and every
+//! white vehicle, `[detection.others]`): `candidates` (other objects published beside the target, summed over
 //! frames), `candidates_overflow` (left out for room) and `candidates_failed`.
 
 use anyhow::{Context, Result};

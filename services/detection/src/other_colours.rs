@@ -7,11 +7,19 @@
 //! candidates), its connected components within the area bounds, on the frame shrunk
 //! `scale` times (2: a quarter of the pixels, ~1 ms less per frame on this machine; a
 //! car still covers ~60 px there, and ±1 px at full size is well inside the cross-view
-//! pairing's 12 px gate). Whites, greys and
-//! blacks have no hue to tell them from a road or a roof and are not found (the motion
-//! detector finds them when they move). Static blobs (a blue roof) may pair across the
-//! views and be located; the tracks report only what has been seen moving
-//! (`[tracks] min_speed_mps`).
+//! pairing's 12 px gate).
+//!
+//! White vehicles have no hue, but they are brighter than anything on a road except its
+//! markings: `whites` adds the pixels with value ≥ `white_value_min` and saturation ≤
+//! `white_saturation_max`, opened (eroded, then dilated) by a square
+//! `white_min_width_px` wide, so that lane lines, dashes and zebra stripes (0.1–0.6 m:
+//! 1–3 px at 0.2 m a pixel) vanish and a car's roof (1.9 m wide: ~10 px) stays. The
+//! choice is in pixels, not metres, because detection knows no ground resolution: a
+//! flight at another height or with another lens sets it (the default fits 0.1–0.35 m
+//! a pixel). Greys and blacks are left out: they are the asphalt's own values (the
+//! motion detector finds them when they move). Static blobs (a blue or white roof)
+//! may pair across the views and be located; the tracks report only what has been
+//! seen moving (`[tracks] min_speed_mps`).
 
 use crate::hue_mask::Scratch;
 use crate::{DetectError, Detection};
@@ -33,6 +41,13 @@ pub struct OtherColoursConfig {
     pub max_area_px: i32,
     /// Look at the frame shrunk this many times (1: full size).
     pub scale: u32,
+    /// Also look for white vehicles (bright pixels with little saturation, opened).
+    pub whites: bool,
+    pub white_value_min: u8,
+    pub white_saturation_max: u8,
+    /// Side of the opening's square (pixels of the full frame): bright strokes
+    /// narrower than this are road markings, not vehicles.
+    pub white_min_width_px: u32,
 }
 
 impl Default for OtherColoursConfig {
@@ -45,6 +60,10 @@ impl Default for OtherColoursConfig {
             min_area_px: 30,
             max_area_px: 20_000,
             scale: 2,
+            whites: true,
+            white_value_min: 200,
+            white_saturation_max: 40,
+            white_min_width_px: 6,
         }
     }
 }
@@ -61,6 +80,9 @@ impl OtherColoursConfig {
         }
         if !(1..=4).contains(&self.scale) {
             return Err("scale must be 1 to 4".into());
+        }
+        if self.whites && !(1..=64).contains(&self.white_min_width_px) {
+            return Err("white_min_width_px must be 1 to 64".into());
         }
         Ok(())
     }
@@ -92,22 +114,39 @@ pub struct OtherColours {
     hues: Vec<[u8; 2]>,
     small: cv::Mat,
     px: Scratch,
+    /// The white pixels before and after the opening.
+    white: cv::Mat,
+    opened: cv::Mat,
+    /// The opening's square, on the frame as looked at (`white_min_width_px / scale`).
+    kernel: cv::Mat,
 }
 
 impl OtherColours {
     /// `target_hues`: the target's `[detection] hue_ranges`.
     pub fn new(config: OtherColoursConfig, target_hues: &[[u8; 2]]) -> Result<Self, DetectError> {
         config.validate().map_err(DetectError::Config)?;
+        // Rounded, then made odd so that the opening is centred (an even square
+        // shifts the blob by a pixel): 6 px is 7 × 7 at full size and 3 × 3 at scale 2.
+        let side = ((config.white_min_width_px as f64 / config.scale.max(1) as f64).round() as i32)
+            .max(1)
+            | 1;
+        let kernel = opencv::imgproc::get_structuring_element_def(
+            opencv::imgproc::MORPH_RECT,
+            cv::Size::new(side, side),
+        )?;
         Ok(Self {
             hues: config.hues(target_hues),
             config,
             small: cv::Mat::default(),
             px: Scratch::default(),
+            white: cv::Mat::default(),
+            opened: cv::Mat::default(),
+            kernel,
         })
     }
 
     pub fn enabled(&self) -> bool {
-        self.config.enabled && !self.hues.is_empty()
+        self.config.enabled && (!self.hues.is_empty() || self.config.whites)
     }
 
     /// Appends to `out` every blob of the colours in the BGR `frame`.
@@ -142,9 +181,24 @@ impl OtherColours {
         let c = &self.config;
         // A pixel here is k × k of the frame; its centre is at k·x + (k − 1)/2.
         let (kf, half) = (k as f64, (k as f64 - 1.0) / 2.0);
-        let n = self
-            .px
-            .label(&self.hues, c.saturation_min as f64, c.value_min as f64)?;
+        self.px
+            .threshold(&self.hues, c.saturation_min as f64, c.value_min as f64)?;
+        if c.whites {
+            cv::in_range(
+                &self.px.hsv,
+                &cv::Scalar::new(0.0, 0.0, c.white_value_min as f64, 0.0),
+                &cv::Scalar::new(180.0, c.white_saturation_max as f64, 255.0, 0.0),
+                &mut self.white,
+            )?;
+            opencv::imgproc::morphology_ex_def(
+                &self.white,
+                &mut self.opened,
+                opencv::imgproc::MORPH_OPEN,
+                &self.kernel,
+            )?;
+            self.px.add_to_mask(&self.opened)?;
+        }
+        let n = self.px.components()?;
         for label in 1..n {
             let stat = |k| self.px.stats.at_2d::<i32>(label, k).copied();
             let area = stat(opencv::imgproc::CC_STAT_AREA)? * k * k;
@@ -238,5 +292,56 @@ mod tests {
             .find(&frame, &mut out)
             .unwrap();
         assert!(out.is_empty());
+    }
+
+    /// A white car is found, at full size and halved; a lane line (2 px), a dash
+    /// (3 px) and zebra stripes (3 px, 3 px apart) of the same white are not, nor a
+    /// grey car; with `whites = false` nothing is.
+    #[test]
+    fn white_cars_are_found_and_road_markings_are_not() {
+        let mut frame = crate::colour_blob::tests::street(&[]);
+        let white = [230.0, 230.0, 230.0];
+        let mut rects = vec![
+            (cv::Rect::new(200, 100, 24, 11), white),
+            (cv::Rect::new(50, 300, 2, 150), white),
+            (cv::Rect::new(300, 400, 40, 3), white),
+            (cv::Rect::new(500, 100, 24, 11), [150.0, 150.0, 150.0]),
+        ];
+        for k in 0..6 {
+            rects.push((cv::Rect::new(400 + 6 * k, 300, 3, 30), white));
+        }
+        for (rect, c) in rects {
+            let colour = cv::Scalar::new(c[0], c[1], c[2], 0.0);
+            opencv::imgproc::rectangle(&mut frame, rect, colour, -1, opencv::imgproc::LINE_8, 0)
+                .unwrap();
+        }
+        for scale in [1, 2] {
+            let config = OtherColoursConfig {
+                scale,
+                ..OtherColoursConfig::default()
+            };
+            let mut finder = OtherColours::new(config, &[[0, 8], [172, 180]]).unwrap();
+            let mut out = Vec::new();
+            finder.find(&frame, &mut out).unwrap();
+            assert_eq!(out.len(), 1, "scale {scale}: {out:?}");
+            assert!((out[0].centre[0] - 211.5).abs() < 1.0, "{out:?}");
+            assert!((out[0].centre[1] - 105.0).abs() < 1.0, "{out:?}");
+        }
+        let no_whites = OtherColoursConfig {
+            whites: false,
+            ..OtherColoursConfig::default()
+        };
+        let mut out = Vec::new();
+        OtherColours::new(no_whites, &[[0, 8], [172, 180]])
+            .unwrap()
+            .find(&frame, &mut out)
+            .unwrap();
+        assert!(out.is_empty(), "{out:?}");
+        assert!(OtherColoursConfig {
+            white_min_width_px: 0,
+            ..OtherColoursConfig::default()
+        }
+        .validate()
+        .is_err());
     }
 }

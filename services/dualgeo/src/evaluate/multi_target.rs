@@ -18,7 +18,7 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 /// Bump when a change makes kept runs stale (the chain, the scorer, the seeding).
-const RUN_FORMAT: u32 = 8;
+const RUN_FORMAT: u32 = 9;
 
 /// What the evaluation runs.
 #[derive(Debug, Clone)]
