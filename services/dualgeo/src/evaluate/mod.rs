@@ -62,8 +62,10 @@ pub struct EvaluateArgs {
     #[arg(long)]
     pub suite_duration_s: Option<f64>,
     /// A `dualgeo run --config` TOML whose `[matching]` section the suite runs with
-    /// (for tuning; the published table uses the defaults).
-    #[arg(long)]
+    /// (for tuning; the published table uses the defaults). Refused with
+    /// `--monte-carlo` and `--multi-target`, which fly the defaults and key their kept
+    /// runs without it.
+    #[arg(long, conflicts_with_all = ["monte_carlo", "multi_target"])]
     pub config: Option<PathBuf>,
     /// Only the Monte Carlo (issue #23): every scene over many seeds; writes
     /// OUT/monte-carlo.md, OUT/monte-carlo.json and OUT/monte-carlo/*.png. Runs are
@@ -462,4 +464,31 @@ pub fn run(args: &EvaluateArgs) -> Result<()> {
         vision_s
     );
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::EvaluateArgs;
+    use clap::Parser;
+
+    #[derive(Parser)]
+    struct Cli {
+        #[command(flatten)]
+        args: EvaluateArgs,
+    }
+
+    /// `--config` reaches the suite only: the Monte Carlo and the multi-target seeds
+    /// would ignore it silently (and read back runs flown without it), so it is an
+    /// error there.
+    #[test]
+    fn config_is_refused_where_it_would_be_ignored() {
+        for mode in ["--monte-carlo", "--multi-target"] {
+            let e = Cli::try_parse_from(["evaluate", mode, "--config", "c.toml"])
+                .err()
+                .unwrap_or_else(|| panic!("{mode} took --config"));
+            assert!(e.to_string().contains("--config"), "{e}");
+        }
+        let ok = Cli::try_parse_from(["evaluate", "--suite-only", "--config", "c.toml"]);
+        assert!(ok.is_ok_and(|c| c.args.config.is_some()));
+    }
 }
