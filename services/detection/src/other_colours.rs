@@ -253,45 +253,62 @@ mod tests {
         .is_err());
     }
 
+    const RED_HUES: [[u8; 2]; 2] = [[0, 8], [172, 180]];
+
+    /// The test street with filled rectangles of the given colours (BGR).
+    fn street_with(rects: &[(cv::Rect, [f64; 3])]) -> cv::Mat {
+        let mut frame = crate::colour_blob::tests::street(&[]);
+        for (rect, c) in rects {
+            let colour = cv::Scalar::new(c[0], c[1], c[2], 0.0);
+            opencv::imgproc::rectangle(&mut frame, *rect, colour, -1, opencv::imgproc::LINE_8, 0)
+                .unwrap();
+        }
+        frame
+    }
+
+    fn found(frame: &cv::Mat, config: OtherColoursConfig) -> Vec<Detection> {
+        let mut out = Vec::new();
+        OtherColours::new(config, &RED_HUES)
+            .unwrap()
+            .find(frame, &mut out)
+            .unwrap();
+        out
+    }
+
+    /// At full size and halved, exactly one blob is found, centred within a pixel of
+    /// `centre`.
+    fn finds_one_at(frame: &cv::Mat, centre: [f64; 2]) {
+        for scale in [1, 2] {
+            let out = found(
+                frame,
+                OtherColoursConfig {
+                    scale,
+                    ..OtherColoursConfig::default()
+                },
+            );
+            assert_eq!(out.len(), 1, "scale {scale}: {out:?}");
+            assert!((out[0].centre[0] - centre[0]).abs() < 1.0, "{out:?}");
+            assert!((out[0].centre[1] - centre[1]).abs() < 1.0, "{out:?}");
+        }
+    }
+
     /// A blue car is found, a red one (the target's colour) and a grey one are not, nor a
     /// blue speck below the area bound.
     #[test]
     fn vivid_blobs_of_other_colours_are_found() {
-        let mut frame = crate::colour_blob::tests::street(&[]);
         let blue = [200.0, 120.0, 40.0];
-        for (rect, c) in [
+        let frame = street_with(&[
             (cv::Rect::new(100, 50, 20, 10), blue),
             (cv::Rect::new(300, 200, 20, 10), [36.0, 28.0, 214.0]),
             (cv::Rect::new(400, 200, 20, 10), [128.0, 128.0, 128.0]),
             (cv::Rect::new(500, 300, 4, 4), blue),
-        ] {
-            let colour = cv::Scalar::new(c[0], c[1], c[2], 0.0);
-            opencv::imgproc::rectangle(&mut frame, rect, colour, -1, opencv::imgproc::LINE_8, 0)
-                .unwrap();
-        }
-        // Full size and halved: the same car, its centre within a pixel.
-        for scale in [1, 2] {
-            let config = OtherColoursConfig {
-                scale,
-                ..OtherColoursConfig::default()
-            };
-            let mut finder = OtherColours::new(config, &[[0, 8], [172, 180]]).unwrap();
-            let mut out = Vec::new();
-            finder.find(&frame, &mut out).unwrap();
-            assert_eq!(out.len(), 1, "scale {scale}: {out:?}");
-            assert!((out[0].centre[0] - 109.5).abs() < 1.0, "{out:?}");
-            assert!((out[0].centre[1] - 54.5).abs() < 1.0, "{out:?}");
-        }
+        ]);
+        finds_one_at(&frame, [109.5, 54.5]);
         let off = OtherColoursConfig {
             enabled: false,
             ..OtherColoursConfig::default()
         };
-        let mut out = Vec::new();
-        OtherColours::new(off, &[[0, 8]])
-            .unwrap()
-            .find(&frame, &mut out)
-            .unwrap();
-        assert!(out.is_empty());
+        assert!(found(&frame, off).is_empty());
     }
 
     /// A white car is found, at full size and halved; a lane line (2 px), a dash
@@ -299,7 +316,6 @@ mod tests {
     /// grey car; with `whites = false` nothing is.
     #[test]
     fn white_cars_are_found_and_road_markings_are_not() {
-        let mut frame = crate::colour_blob::tests::street(&[]);
         let white = [230.0, 230.0, 230.0];
         let mut rects = vec![
             (cv::Rect::new(200, 100, 24, 11), white),
@@ -310,32 +326,13 @@ mod tests {
         for k in 0..6 {
             rects.push((cv::Rect::new(400 + 6 * k, 300, 3, 30), white));
         }
-        for (rect, c) in rects {
-            let colour = cv::Scalar::new(c[0], c[1], c[2], 0.0);
-            opencv::imgproc::rectangle(&mut frame, rect, colour, -1, opencv::imgproc::LINE_8, 0)
-                .unwrap();
-        }
-        for scale in [1, 2] {
-            let config = OtherColoursConfig {
-                scale,
-                ..OtherColoursConfig::default()
-            };
-            let mut finder = OtherColours::new(config, &[[0, 8], [172, 180]]).unwrap();
-            let mut out = Vec::new();
-            finder.find(&frame, &mut out).unwrap();
-            assert_eq!(out.len(), 1, "scale {scale}: {out:?}");
-            assert!((out[0].centre[0] - 211.5).abs() < 1.0, "{out:?}");
-            assert!((out[0].centre[1] - 105.0).abs() < 1.0, "{out:?}");
-        }
+        let frame = street_with(&rects);
+        finds_one_at(&frame, [211.5, 105.0]);
         let no_whites = OtherColoursConfig {
             whites: false,
             ..OtherColoursConfig::default()
         };
-        let mut out = Vec::new();
-        OtherColours::new(no_whites, &[[0, 8], [172, 180]])
-            .unwrap()
-            .find(&frame, &mut out)
-            .unwrap();
+        let out = found(&frame, no_whites);
         assert!(out.is_empty(), "{out:?}");
         assert!(OtherColoursConfig {
             white_min_width_px: 0,
