@@ -17,8 +17,12 @@ use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
+/// One vehicle of a run: (id, located share, MAE x, y, z, share of its located
+/// estimates inside their h_acc; NaN-free: `None` never located / none stated).
+pub type VehicleFigures = (u32, f64, Option<[f64; 3]>, Option<f64>);
+
 /// Bump when a change makes kept runs stale (the chain, the scorer, the seeding).
-const RUN_FORMAT: u32 = 9;
+const RUN_FORMAT: u32 = 10;
 
 /// What the evaluation runs.
 #[derive(Debug, Clone)]
@@ -54,8 +58,7 @@ pub struct RunScore {
     pub scored_s: f64,
     /// Matched / in view over every vehicle and pair (CLEAR MOT, 2 m).
     pub located_share: f64,
-    /// Per vehicle: (id, located share, MAE x, y, z; NaN-free: `None` never located).
-    pub per_vehicle: Vec<(u32, f64, Option<[f64; 3]>)>,
+    pub per_vehicle: Vec<VehicleFigures>,
     pub yaw_bias_mae_deg: Option<[f64; 2]>,
 }
 
@@ -144,7 +147,7 @@ fn fly(plan: &Plan, presets: &Presets, scene: &str, seed: u64) -> Result<RunScor
         per_vehicle: score
             .vehicles
             .iter()
-            .map(|v| (v.id, v.located_share, v.mae_m))
+            .map(|v| (v.id, v.located_share, v.mae_m, v.inside_h_acc))
             .collect(),
         yaw_bias_mae_deg,
     })
@@ -277,9 +280,9 @@ pub fn report(runs: &[RunScore], command: &str, wall_s: f64) -> String {
             .collect();
         ids.sort_unstable();
         ids.dedup();
-        out += "| vehicle | located (median over seeds, range) | MAE x / y / z (m, median over the seeds that located it) |\n| --- | --- | --- |\n";
+        out += "| vehicle | located (median over seeds, range) | MAE x / y / z (m, median over the seeds that located it) | located estimates inside h_acc (median, range) |\n| --- | --- | --- | --- |\n";
         for id in ids {
-            let of: Vec<&(u32, f64, Option<[f64; 3]>)> = rs
+            let of: Vec<&VehicleFigures> = rs
                 .iter()
                 .filter_map(|r| r.per_vehicle.iter().find(|v| v.0 == id))
                 .collect();
@@ -291,8 +294,14 @@ pub fn report(runs: &[RunScore], command: &str, wall_s: f64) -> String {
             } else {
                 format!("{:.2} / {:.2} / {:.2}", axis(0), axis(1), axis(2))
             };
+            let inside: Vec<f64> = of.iter().filter_map(|v| v.3).map(|f| 100.0 * f).collect();
+            let inside_cell = if inside.is_empty() {
+                "—".to_string()
+            } else {
+                format!("{} %", cell(inside, 0))
+            };
             out += &format!(
-                "| {id}{} | {} % | {mae_cell} |\n",
+                "| {id}{} | {} % | {mae_cell} | {inside_cell} |\n",
                 if id == 0 { " (the target)" } else { "" },
                 cell(shares, 1)
             );
@@ -351,7 +360,10 @@ mod tests {
             vehicles: 2,
             scored_s: 30.0,
             located_share: share,
-            per_vehicle: vec![(0, 0.9, Some([0.5, 0.5, 1.0])), (1, share, None)],
+            per_vehicle: vec![
+                (0, 0.9, Some([0.5, 0.5, 1.0]), Some(0.6)),
+                (1, share, None, None),
+            ],
             yaw_bias_mae_deg: Some([2.0, 3.0]),
         }
     }

@@ -18,11 +18,13 @@ pub struct TrackRow {
     pub p: [f64; 3],
     /// Left, right, degrees, when the file has them.
     pub yaw_bias_deg: Option<[f64; 2]>,
+    /// The stated horizontal accuracy (1σ, metres), when the file has it.
+    pub h_acc_m: Option<f64>,
 }
 
 /// Reads a track.csv by its column names (`t_s`, `x_m`, `y_m`, `z_m`; `track_id`,
-/// `yaw_bias_left_deg`, `yaw_bias_right_deg` when present), so files written before
-/// and after `track_id` read alike.
+/// `yaw_bias_left_deg`, `yaw_bias_right_deg`, `h_acc_m` when present), so files
+/// written before and after `track_id` read alike.
 pub fn read_track(path: &Path) -> Result<Vec<TrackRow>> {
     let mut r = csv::Reader::from_path(path).with_context(|| format!("open {}", path.display()))?;
     let headers = r
@@ -41,6 +43,7 @@ pub fn read_track(path: &Path) -> Result<Vec<TrackRow>> {
     );
     let id = column("track_id");
     let bias = column("yaw_bias_left_deg").zip(column("yaw_bias_right_deg"));
+    let h_acc = column("h_acc_m");
     let mut rows = Vec::new();
     for (i, record) in r.records().enumerate() {
         let line = i + 2;
@@ -82,11 +85,16 @@ pub fn read_track(path: &Path) -> Result<Vec<TrackRow>> {
             Some((l, r)) if present(l) || present(r) => Some([number(l)?, number(r)?]),
             _ => None,
         };
+        let h_acc_m = match h_acc {
+            Some(c) if present(c) => Some(number(c)?),
+            _ => None,
+        };
         rows.push(TrackRow {
             t_s: number(t)?,
             track_id,
             p: [number(x)?, number(y)?, number(z)?],
             yaw_bias_deg,
+            h_acc_m,
         });
     }
     Ok(rows)
@@ -224,7 +232,11 @@ pub fn load(recording: &Path, track: &Path, warm_up_s: f64) -> Result<Loaded> {
         for &(id, p, in_left) in left {
             let in_right = right.iter().any(|&(rid, _, shown)| rid == id && shown);
             if in_left && in_right {
-                frame.truth.push(Object { id, p });
+                frame.truth.push(Object {
+                    id,
+                    p,
+                    h_acc_m: None,
+                });
             } else {
                 frame.dont_care.push(p);
             }
@@ -239,6 +251,7 @@ pub fn load(recording: &Path, track: &Path, warm_up_s: f64) -> Result<Loaded> {
             .map(|e| Object {
                 id: e.track_id,
                 p: e.p,
+                h_acc_m: e.h_acc_m,
             })
             .collect();
         if let Some([bl, br]) = estimates[k].iter().find_map(|e| e.yaw_bias_deg) {

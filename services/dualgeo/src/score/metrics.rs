@@ -32,6 +32,8 @@ pub struct Object {
     pub id: u32,
     /// ENU metres.
     pub p: [f64; 3],
+    /// An estimate's stated horizontal accuracy (1σ, metres), when it has one.
+    pub h_acc_m: Option<f64>,
 }
 
 /// Everything known at one stereo pair.
@@ -113,6 +115,10 @@ pub struct PerVehicle {
     /// Mean |error| of the matched estimates, x / y / z, metres; `None` when never
     /// located.
     pub mae_m: Option<[f64; 3]>,
+    /// Share of the matched estimates that state an h_acc whose horizontal error is
+    /// within it (a calibrated 2-D 1σ holds ~63 %; the match's 2 m threshold leaves
+    /// the farthest out, so this is an upper bound); `None` without any.
+    pub inside_h_acc: Option<f64>,
     pub id_switches: u64,
     /// The tracks that were matched to it, by id.
     pub tracks: Vec<u32>,
@@ -217,7 +223,9 @@ pub fn score(frames: &[Frame], params: Params) -> MultiScore {
     // IDF1: co-occurrence within the threshold, and the totals.
     let mut within: BTreeMap<(u32, u32), u64> = BTreeMap::new();
     let (mut truth_total, mut est_total, mut dont_care) = (0u64, 0u64, 0u64);
-    let mut vehicles: BTreeMap<u32, (PerVehicle, [f64; 3])> = BTreeMap::new();
+    // Per vehicle: its figures, the sum of |error| per axis of its matched estimates,
+    // and how many of those state an h_acc and how many lie within it.
+    let mut vehicles: BTreeMap<u32, (PerVehicle, [f64; 3], [u64; 2])> = BTreeMap::new();
     let mut switch_events = Vec::new();
 
     for frame in frames {
@@ -299,10 +307,12 @@ pub fn score(frames: &[Frame], params: Params) -> MultiScore {
                         located: 0,
                         located_share: 0.0,
                         mae_m: None,
+                        inside_h_acc: None,
                         id_switches: 0,
                         tracks: Vec::new(),
                     },
                     [0.0; 3],
+                    [0u64; 2],
                 )
             });
             entry.0.in_view += 1;
@@ -331,6 +341,11 @@ pub fn score(frames: &[Frame], params: Params) -> MultiScore {
             }
             for (k, abs) in entry.1.iter_mut().enumerate() {
                 *abs += (est[e].p[k] - obj.p[k]).abs();
+            }
+            if let Some(h_acc) = est[e].h_acc_m {
+                let h_err = (est[e].p[0] - obj.p[0]).hypot(est[e].p[1] - obj.p[1]);
+                entry.2[0] += 1;
+                entry.2[1] += u64::from(h_err <= h_acc);
             }
         }
         clear.false_positives += est_taken.iter().filter(|&&taken| !taken).count() as u64;
@@ -383,9 +398,12 @@ pub fn score(frames: &[Frame], params: Params) -> MultiScore {
     };
     let vehicles = vehicles
         .into_values()
-        .map(|(mut v, abs)| {
+        .map(|(mut v, abs, [stating, inside])| {
             if v.located > 0 {
                 v.mae_m = Some(abs.map(|a| a / v.located as f64));
+            }
+            if stating > 0 {
+                v.inside_h_acc = Some(inside as f64 / stating as f64);
             }
             v.located_share = v.located as f64 / v.in_view.max(1) as f64;
             v.tracks.sort_unstable();
@@ -456,6 +474,7 @@ mod tests {
         Object {
             id,
             p: [x, y, 13.5],
+            h_acc_m: None,
         }
     }
 
@@ -611,6 +630,7 @@ mod tests {
                 vec![Object {
                     id: 1,
                     p: [0.5, -1.0, 12.5],
+                    h_acc_m: Some(1.0),
                 }],
             ),
             frame(
@@ -618,6 +638,7 @@ mod tests {
                 vec![Object {
                     id: 1,
                     p: [-0.5, 0.0, 14.5],
+                    h_acc_m: Some(1.0),
                 }],
             ),
             frame(vec![obj(0, 0.0, 0.0)], vec![]),
@@ -627,5 +648,7 @@ mod tests {
         assert_eq!((v.in_view, v.located), (3, 2));
         assert_eq!(v.mae_m, Some([0.5, 0.5, 1.0]));
         assert!((v.located_share - 2.0 / 3.0).abs() < 1e-12);
+        // 1.12 m off against ±1 m, then 0.5 m: one of the two inside.
+        assert_eq!(v.inside_h_acc, Some(0.5));
     }
 }
