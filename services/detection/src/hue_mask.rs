@@ -4,7 +4,6 @@
 //! so nothing is allocated per frame once they have their size.
 
 use opencv::core as cv;
-use opencv::prelude::*;
 
 /// An HSV image and the buffers of its thresholds and components (as OpenCV's
 /// `connected_components_with_stats` fills `labels`, `stats` and `centroids`).
@@ -42,8 +41,9 @@ impl Scratch {
         value_min: f64,
     ) -> opencv::Result<()> {
         if hues.is_empty() {
-            self.mask = cv::Mat::zeros(self.hsv.rows(), self.hsv.cols(), cv::CV_8UC1)?.to_mat()?;
-            return Ok(());
+            // An empty range: all zeros, in `mask`'s own buffer (no allocation per frame).
+            let (above, below) = (cv::Scalar::all(1.0), cv::Scalar::all(0.0));
+            return cv::in_range(&self.hsv, &above, &below, &mut self.mask);
         }
         for (i, [lo, hi]) in hues.iter().enumerate() {
             let low = cv::Scalar::new(*lo as f64, saturation_min, value_min, 0.0);

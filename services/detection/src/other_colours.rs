@@ -328,6 +328,13 @@ mod tests {
         }
         let frame = street_with(&rects);
         finds_one_at(&frame, [211.5, 105.0]);
+        // A target of every hue leaves only the whites to look for.
+        let mut out = Vec::new();
+        OtherColours::new(OtherColoursConfig::default(), &[[0, 180]])
+            .unwrap()
+            .find(&frame, &mut out)
+            .unwrap();
+        assert_eq!(out.len(), 1, "{out:?}");
         let no_whites = OtherColoursConfig {
             whites: false,
             ..OtherColoursConfig::default()

@@ -343,9 +343,9 @@ pub fn score(frames: &[Frame], params: Params) -> MultiScore {
                 *abs += (est[e].p[k] - obj.p[k]).abs();
             }
             if let Some(h_acc) = est[e].h_acc_m {
-                let h_err = (est[e].p[0] - obj.p[0]).hypot(est[e].p[1] - obj.p[1]);
+                // `d` is the horizontal distance.
                 entry.2[0] += 1;
-                entry.2[1] += u64::from(h_err <= h_acc);
+                entry.2[1] += u64::from(d[g][e] <= h_acc);
             }
         }
         clear.false_positives += est_taken.iter().filter(|&&taken| !taken).count() as u64;
