@@ -65,11 +65,18 @@ fn observations_of(
 
 /// Vehicle `other` located relative to the target: both through the same images with
 /// the same biases, and the difference added to the target's estimate `msg`. What
-/// the two share (each image's GPS and attitude error, the biases' error, the
-/// altitude's) cancels in the difference; the target's filter has averaged it out of
-/// the target's own estimate over time, one window of a vehicle could not. Its
-/// covariance: the target's (x, y) block plus the vehicle's own with the biases taken
-/// as known (their error is common to both and cancels).
+/// the two share (each image's GPS and attitude error, the altitude's) cancels in the
+/// difference; the target's filter has averaged it out of the target's own estimate
+/// over time, one window of a vehicle could not.
+///
+/// Its covariance, as the tracks weigh a fix: the target's (x, y) block plus the
+/// vehicle's own with the biases taken as known (the tracks' learnt noise scale fits
+/// it to their innovations). What persists from pair to pair, and so outlives a
+/// track's averaging (`OtherFix::persistent_xy`), is stated apart: the target's
+/// (x, y) block, and the biases' error carried into the difference. The biases'
+/// error does not cancel there: it turns each UAV's rays about the UAV, so the
+/// difference moves by (J_vehicle − J_target) δψ, J the fixes' `bias_sensitivity`;
+/// its covariance is J_d P_b J_dᵀ with P_b the target filter's.
 fn locate_relative(
     set: &ObservationSetMsg,
     other: &OtherTarget,
@@ -88,10 +95,17 @@ fn locate_relative(
         msg.position[1] + d.y,
         msg.position[2] + d.z,
     );
+    let j = fix.bias_sensitivity - reference.bias_sensitivity;
+    let persistent_xy = target_xy + j * biases.covariance * j.transpose();
+    if !persistent_xy.iter().all(|v| v.is_finite()) {
+        return Err("non_finite");
+    }
     Ok(OtherFix {
         position,
         covariance_xy: target_xy + fix.covariance_xy_given_biases,
         covariance_xy_given_biases: target_xy + fix.covariance_xy_given_biases,
+        bias_sensitivity: j,
+        persistent_xy,
         altitude_std_error_m: fix.altitude_std_error_m.hypot(msg.altitude_std_error_m),
         colour_bgr: Some(std::array::from_fn(|c| {
             (f64::from(other.bgr[0][c]) + f64::from(other.bgr[1][c])) / 2.0

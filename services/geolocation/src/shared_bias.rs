@@ -37,6 +37,17 @@ pub struct OtherFix {
     /// of the biases' block): what is left of it in a difference with another
     /// vehicle located through the same images with the same biases.
     pub covariance_xy_given_biases: Matrix2<f64>,
+    /// How its (x, y) moves with the biases, m/rad: ∂(x, y)/∂(δψ_L, δψ_R) at the
+    /// solution (P_xb P_bb⁻¹ of the regression's covariance, eq. 15). Two vehicles
+    /// located through the same images do not share their biases' error: a yaw error
+    /// turns each UAV's rays about the UAV, so their difference moves by about the
+    /// yaw error times their separation (1 m per 2° at 30 m).
+    pub bias_sensitivity: Matrix2<f64>,
+    /// Covariance of the part of its (x, y) error that persists from pair to pair
+    /// (the biases' error, and for a fix relative to the target the target's own
+    /// estimate's), m²: a track that averages its fixes cannot average this away, so
+    /// it adds it to the covariance it states.
+    pub persistent_xy: Matrix2<f64>,
     /// Standard error of z (eq. 22 residuals), metres.
     pub altitude_std_error_m: f64,
     /// Its colour (BGR, the two views' mean), when known: appearance for
@@ -109,19 +120,27 @@ pub fn locate_with_biases(
     let pxx = p.fixed_view::<2, 2>(0, 0).into_owned();
     let pxb = p.fixed_view::<2, 2>(0, 2).into_owned();
     let pbb = p.fixed_view::<2, 2>(2, 2).into_owned();
-    let given_biases = pbb
+    // Conditioning the joint Gaussian on the biases: E[xy | δψ] moves by
+    // P_xb P_bb⁻¹ per radian; the prior adds information to the biases' block only,
+    // so this is the images' own geometry.
+    let sensitivity = pbb
         .try_inverse()
-        .map_or(pxx, |inv| pxx - pxb * inv * pxb.transpose());
+        .map_or_else(Matrix2::zeros, |inv| pxb * inv);
+    let given_biases = pxx - sensitivity * pxb.transpose();
     let fix = OtherFix {
         position: Point3::new(solution.xy.x, solution.xy.y, altitude.z_target),
         covariance_xy: pxx,
         covariance_xy_given_biases: given_biases,
+        bias_sensitivity: sensitivity,
+        persistent_xy: pxx - given_biases,
         altitude_std_error_m: altitude.std_error_m,
         colour_bgr: None,
     };
     let finite = fix.position.iter().all(|v| v.is_finite())
         && fix.covariance_xy.iter().all(|v| v.is_finite())
         && fix.covariance_xy_given_biases.iter().all(|v| v.is_finite())
+        && fix.bias_sensitivity.iter().all(|v| v.is_finite())
+        && fix.persistent_xy.iter().all(|v| v.is_finite())
         && fix.altitude_std_error_m.is_finite();
     if finite {
         Ok(fix)
@@ -189,6 +208,36 @@ mod tests {
         let wide = locate_with_biases(&trial.observations, &biases(truth, 5.0), &cfg).unwrap();
         assert!(wide.covariance_xy.trace() > fix.covariance_xy.trace());
         assert!(wide.covariance_xy_given_biases.trace() < wide.covariance_xy.trace());
+    }
+
+    /// `bias_sensitivity` is how the fix moves when the biases it is given move (held
+    /// tightly, so the images cannot pull them back): a finite difference agrees
+    /// within 2 %. Its persistent part is the biases' share of its covariance.
+    #[test]
+    fn the_bias_sensitivity_is_the_fixs_own_derivative() {
+        let s = SyntheticScenario::default();
+        let trial = s.trial(6.0, 4, &mut StdRng::seed_from_u64(5)).unwrap();
+        let cfg = EstimatorConfig::default();
+        let at =
+            |b: [f64; 2]| locate_with_biases(&trial.observations, &biases(b, 0.001), &cfg).unwrap();
+        let base = at([3.0, -2.0]);
+        let step_deg = 0.05;
+        for k in 0..2 {
+            let mut b = [3.0, -2.0];
+            b[k] += step_deg;
+            let moved = (at(b).position - base.position).xy() / step_deg.to_radians();
+            let predicted = base.bias_sensitivity.column(k).into_owned();
+            assert!(predicted.norm() > 10.0, "{predicted}");
+            assert!(
+                (moved - predicted).norm() < 0.02 * predicted.norm(),
+                "bias {k}: {moved} vs {predicted}"
+            );
+        }
+        let loose =
+            locate_with_biases(&trial.observations, &biases([3.0, -2.0], 2.0), &cfg).unwrap();
+        let split = loose.covariance_xy_given_biases + loose.persistent_xy;
+        assert!((split - loose.covariance_xy).abs().max() < 1e-9);
+        assert!(loose.persistent_xy.trace() > 0.0);
     }
 
     #[test]
