@@ -76,7 +76,8 @@ fn observations_of(
 /// (x, y) block, and the biases' error carried into the difference. The biases'
 /// error does not cancel there: it turns each UAV's rays about the UAV, so the
 /// difference moves by (J_vehicle − J_target) δψ, J the fixes' `bias_sensitivity`;
-/// its covariance is J_d P_b J_dᵀ with P_b the target filter's.
+/// its covariance is J_d P_b J_dᵀ with P_b the target filter's. The same for z: the
+/// target's altitude variance and the biases' share of the difference's z.
 fn locate_relative(
     set: &ObservationSetMsg,
     other: &OtherTarget,
@@ -97,7 +98,12 @@ fn locate_relative(
     );
     let j = fix.bias_sensitivity - reference.bias_sensitivity;
     let persistent_xy = target_xy + j * biases.covariance * j.transpose();
-    if !persistent_xy.iter().all(|v| v.is_finite()) {
+    let jz: [f64; 2] = std::array::from_fn(|k| {
+        fix.altitude_bias_sensitivity[k] - reference.altitude_bias_sensitivity[k]
+    });
+    let jz_v = Vector2::from(jz);
+    let persistent_z_var = msg.altitude_std_error_m.powi(2) + jz_v.dot(&(biases.covariance * jz_v));
+    if !persistent_xy.iter().all(|v| v.is_finite()) || !persistent_z_var.is_finite() {
         return Err("non_finite");
     }
     Ok(OtherFix {
@@ -106,6 +112,8 @@ fn locate_relative(
         covariance_xy_given_biases: target_xy + fix.covariance_xy_given_biases,
         bias_sensitivity: j,
         persistent_xy,
+        altitude_bias_sensitivity: jz,
+        persistent_z_var,
         altitude_std_error_m: fix.altitude_std_error_m.hypot(msg.altitude_std_error_m),
         colour_bgr: Some(std::array::from_fn(|c| {
             (f64::from(other.bgr[0][c]) + f64::from(other.bgr[1][c])) / 2.0

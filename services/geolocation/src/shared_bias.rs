@@ -48,6 +48,12 @@ pub struct OtherFix {
     /// estimate's), m²: a track that averages its fixes cannot average this away, so
     /// it adds it to the covariance it states.
     pub persistent_xy: Matrix2<f64>,
+    /// How its z moves with the biases, m/rad: ∂z/∂(δψ_L, δψ_R) of eq. (16)–(23)
+    /// with the yaws corrected by them (eq. 19), by central differences.
+    pub altitude_bias_sensitivity: [f64; 2],
+    /// Variance of the part of its z error that persists from pair to pair, m² (as
+    /// `persistent_xy`).
+    pub persistent_z_var: f64,
     /// Standard error of z (eq. 22 residuals), metres.
     pub altitude_std_error_m: f64,
     /// Its colour (BGR, the two views' mean), when known: appearance for
@@ -127,12 +133,16 @@ pub fn locate_with_biases(
         .try_inverse()
         .map_or_else(Matrix2::zeros, |inv| pxb * inv);
     let given_biases = pxx - sensitivity * pxb.transpose();
+    let z_sensitivity = altitude_sensitivity(observations, &rays, bias, min_angle);
+    let jz = Vector2::from(z_sensitivity);
     let fix = OtherFix {
         position: Point3::new(solution.xy.x, solution.xy.y, altitude.z_target),
         covariance_xy: pxx,
         covariance_xy_given_biases: given_biases,
         bias_sensitivity: sensitivity,
         persistent_xy: pxx - given_biases,
+        altitude_bias_sensitivity: z_sensitivity,
+        persistent_z_var: jz.dot(&(pbb * jz)),
         altitude_std_error_m: altitude.std_error_m,
         colour_bgr: None,
     };
@@ -141,12 +151,38 @@ pub fn locate_with_biases(
         && fix.covariance_xy_given_biases.iter().all(|v| v.is_finite())
         && fix.bias_sensitivity.iter().all(|v| v.is_finite())
         && fix.persistent_xy.iter().all(|v| v.is_finite())
+        && fix.persistent_z_var.is_finite()
         && fix.altitude_std_error_m.is_finite();
     if finite {
         Ok(fix)
     } else {
         Err(EstimatorError::NonFiniteResult { what: "other fix" })
     }
+}
+
+/// ∂z/∂(δψ_L, δψ_R) of the altitude (eq. 16–23) at `bias`, m/rad, by central
+/// differences of 1e-4 rad (the midpoints' selection makes no closed form worth its
+/// code); 0 for a bias whose neighbours the altitude refuses.
+fn altitude_sensitivity(
+    observations: &[Observation],
+    rays: &[PreparedRay],
+    bias: [f64; 2],
+    min_angle_rad: f64,
+) -> [f64; 2] {
+    const STEP_RAD: f64 = 1e-4;
+    std::array::from_fn(|k| {
+        let at = |step: f64| {
+            let mut b = bias;
+            b[k] += step;
+            estimate_altitude(observations, rays, b, min_angle_rad)
+                .ok()
+                .map(|a| a.z_target)
+        };
+        match (at(STEP_RAD), at(-STEP_RAD)) {
+            (Some(up), Some(down)) if (up - down).is_finite() => (up - down) / (2.0 * STEP_RAD),
+            _ => 0.0,
+        }
+    })
 }
 
 #[cfg(test)]
@@ -238,6 +274,18 @@ mod tests {
         let split = loose.covariance_xy_given_biases + loose.persistent_xy;
         assert!((split - loose.covariance_xy).abs().max() < 1e-9);
         assert!(loose.persistent_xy.trace() > 0.0);
+        // z: the same finite difference, through the whole fix.
+        for k in 0..2 {
+            let mut b = [3.0, -2.0];
+            b[k] += step_deg;
+            let moved = (at(b).position.z - base.position.z) / step_deg.to_radians();
+            let predicted = base.altitude_bias_sensitivity[k];
+            assert!(
+                (moved - predicted).abs() < 0.02 * predicted.abs() + 0.05,
+                "z, bias {k}: {moved} vs {predicted}"
+            );
+        }
+        assert!(base.altitude_bias_sensitivity.iter().any(|j| j.abs() > 1.0));
     }
 
     #[test]

@@ -173,6 +173,8 @@ struct Track {
     /// added to `p`'s (x, y) block in what it states, since averaging the fixes does
     /// not shrink it.
     persistent_xy: Matrix2<f64>,
+    /// The same for z (`OtherFix::persistent_z_var`), m².
+    persistent_z_var: f64,
     t_s: f64,
     last_fix_s: f64,
     /// One bit per pair since birth (newest lowest), while tentative.
@@ -247,6 +249,7 @@ pub struct TrackState {
     pub z_var: f64,
     /// Row-major 2 × 2 (`Track::persistent_xy`).
     pub persistent_xy: [f64; 4],
+    pub persistent_z_var: f64,
     pub t_s: f64,
     pub last_fix_s: f64,
     pub hits: u32,
@@ -304,6 +307,7 @@ impl Tracks {
                     z: t.z,
                     z_var: t.z_var,
                     persistent_xy: std::array::from_fn(|k| t.persistent_xy[(k / 2, k % 2)]),
+                    persistent_z_var: t.persistent_z_var,
                     t_s: t.t_s,
                     last_fix_s: t.last_fix_s,
                     hits: t.hits,
@@ -336,7 +340,7 @@ impl Tracks {
                 t.x.iter()
                     .chain(&t.p)
                     .chain(&t.persistent_xy)
-                    .chain([&t.z, &t.z_var, &t.t_s, &t.last_fix_s])
+                    .chain([&t.z, &t.z_var, &t.persistent_z_var, &t.t_s, &t.last_fix_s])
                     .all(|v| v.is_finite());
             if !finite {
                 return Err(format!("track {} is not finite", t.id));
@@ -349,6 +353,7 @@ impl Tracks {
                 && persistent[(0, 0)] >= 0.0
                 && persistent[(1, 1)] >= 0.0;
             let in_range = t.z_var >= 0.0
+                && t.persistent_z_var >= 0.0
                 && (0..4).all(|k| p[(k, k)] >= 0.0)
                 && symmetric
                 && persistent_ok
@@ -370,6 +375,7 @@ impl Tracks {
                 z: t.z,
                 z_var: t.z_var,
                 persistent_xy: persistent,
+                persistent_z_var: t.persistent_z_var,
                 t_s: t.t_s,
                 last_fix_s: t.last_fix_s,
                 hits: t.hits,
@@ -504,6 +510,7 @@ impl Tracks {
                 z: f.position.z,
                 z_var: f.altitude_std_error_m.powi(2).max(0.25),
                 persistent_xy: f.persistent_xy,
+                persistent_z_var: f.persistent_z_var,
                 t_s,
                 last_fix_s: t_s,
                 hits: 0,
@@ -578,7 +585,7 @@ impl Tracks {
                 // What averaging shrank, and what it cannot (the last fix's persistent
                 // part): a consider covariance (Schmidt), without the states.
                 covariance_xy: t.p.fixed_view::<2, 2>(0, 0) + t.persistent_xy,
-                altitude_std_m: t.z_var.sqrt(),
+                altitude_std_m: (t.z_var + t.persistent_z_var).sqrt(),
                 velocity_mps: [t.x[2], t.x[3]],
                 quality: if t.updated {
                     TrackQuality::Tracking
@@ -701,6 +708,9 @@ fn correct(track: &mut Track, fix: &OtherFix, r: Matrix2<f64>, t_s: f64) {
     if fix.persistent_xy.iter().all(|v| v.is_finite()) {
         track.persistent_xy = fix.persistent_xy;
     }
+    if fix.persistent_z_var.is_finite() {
+        track.persistent_z_var = fix.persistent_z_var;
+    }
     track.last_fix_s = t_s;
     track.updated = true;
 }
@@ -717,6 +727,8 @@ mod tests {
             covariance_xy_given_biases: Matrix2::identity() * 0.04,
             bias_sensitivity: Matrix2::zeros(),
             persistent_xy: Matrix2::zeros(),
+            altitude_bias_sensitivity: [0.0; 2],
+            persistent_z_var: 0.0,
             altitude_std_error_m: 0.5,
             colour_bgr: Some([0.0, 200.0, 220.0]),
         }
@@ -996,6 +1008,9 @@ mod tests {
         assert!(Tracks::restore(config, &bad).is_err());
         let mut bad = snap.clone();
         bad.tracks[0].persistent_xy[1] = f64::NAN;
+        assert!(Tracks::restore(config, &bad).is_err());
+        let mut bad = snap.clone();
+        bad.tracks[0].persistent_z_var = -0.5;
         assert!(Tracks::restore(config, &bad).is_err());
         let mut bad = snap;
         bad.next_id = u32::MAX;

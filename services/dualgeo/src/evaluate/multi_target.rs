@@ -18,11 +18,12 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 /// One vehicle of a run: (id, located share, MAE x, y, z, share of its located
-/// estimates inside their h_acc; NaN-free: `None` never located / none stated).
-pub type VehicleFigures = (u32, f64, Option<[f64; 3]>, Option<f64>);
+/// estimates inside their h_acc, and inside their v_acc; NaN-free: `None` never
+/// located / none stated).
+pub type VehicleFigures = (u32, f64, Option<[f64; 3]>, Option<f64>, Option<f64>);
 
 /// Bump when a change makes kept runs stale (the chain, the scorer, the seeding).
-const RUN_FORMAT: u32 = 11;
+const RUN_FORMAT: u32 = 12;
 
 /// What the evaluation runs.
 #[derive(Debug, Clone)]
@@ -147,7 +148,15 @@ fn fly(plan: &Plan, presets: &Presets, scene: &str, seed: u64) -> Result<RunScor
         per_vehicle: score
             .vehicles
             .iter()
-            .map(|v| (v.id, v.located_share, v.mae_m, v.inside_h_acc))
+            .map(|v| {
+                (
+                    v.id,
+                    v.located_share,
+                    v.mae_m,
+                    v.inside_h_acc,
+                    v.inside_v_acc,
+                )
+            })
             .collect(),
         yaw_bias_mae_deg,
     })
@@ -280,7 +289,7 @@ pub fn report(runs: &[RunScore], command: &str, wall_s: f64) -> String {
             .collect();
         ids.sort_unstable();
         ids.dedup();
-        out += "| vehicle | located (median over seeds, range) | MAE x / y / z (m, median over the seeds that located it) | located estimates inside h_acc (median, range) |\n| --- | --- | --- | --- |\n";
+        out += "| vehicle | located (median over seeds, range) | MAE x / y / z (m, median over the seeds that located it) | located estimates inside h_acc / v_acc (median, range) |\n| --- | --- | --- | --- |\n";
         for id in ids {
             let of: Vec<&VehicleFigures> = rs
                 .iter()
@@ -294,12 +303,19 @@ pub fn report(runs: &[RunScore], command: &str, wall_s: f64) -> String {
             } else {
                 format!("{:.2} / {:.2} / {:.2}", axis(0), axis(1), axis(2))
             };
-            let inside: Vec<f64> = of.iter().filter_map(|v| v.3).map(|f| 100.0 * f).collect();
-            let inside_cell = if inside.is_empty() {
-                "—".to_string()
-            } else {
-                format!("{} %", cell(inside, 0))
+            let inside = |share: fn(&VehicleFigures) -> Option<f64>| {
+                let v: Vec<f64> = of
+                    .iter()
+                    .filter_map(|v| share(v))
+                    .map(|f| 100.0 * f)
+                    .collect();
+                if v.is_empty() {
+                    "—".to_string()
+                } else {
+                    format!("{} %", cell(v, 0))
+                }
             };
+            let inside_cell = format!("{} / {}", inside(|v| v.3), inside(|v| v.4));
             out += &format!(
                 "| {id}{} | {} % | {mae_cell} | {inside_cell} |\n",
                 if id == 0 { " (the target)" } else { "" },
@@ -361,8 +377,8 @@ mod tests {
             scored_s: 30.0,
             located_share: share,
             per_vehicle: vec![
-                (0, 0.9, Some([0.5, 0.5, 1.0]), Some(0.6)),
-                (1, share, None, None),
+                (0, 0.9, Some([0.5, 0.5, 1.0]), Some(0.6), Some(0.7)),
+                (1, share, None, None, None),
             ],
             yaw_bias_mae_deg: Some([2.0, 3.0]),
         }
@@ -385,7 +401,9 @@ mod tests {
             "{text}"
         );
         assert!(
-            text.contains("| 0 (the target) | 90.0 (90.0–90.0) % | 0.50 / 0.50 / 1.00 |"),
+            text.contains(
+                "| 0 (the target) | 90.0 (90.0–90.0) % | 0.50 / 0.50 / 1.00 | 60 (60–60) % / 70 (70–70) % |"
+            ),
             "{text}"
         );
         assert!(text.contains("| 2.00 / 3.00 |"), "{text}");

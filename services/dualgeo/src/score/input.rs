@@ -20,10 +20,12 @@ pub struct TrackRow {
     pub yaw_bias_deg: Option<[f64; 2]>,
     /// The stated horizontal accuracy (1σ, metres), when the file has it.
     pub h_acc_m: Option<f64>,
+    /// The stated vertical accuracy (1σ, metres), when the file has it.
+    pub v_acc_m: Option<f64>,
 }
 
 /// Reads a track.csv by its column names (`t_s`, `x_m`, `y_m`, `z_m`; `track_id`,
-/// `yaw_bias_left_deg`, `yaw_bias_right_deg`, `h_acc_m` when present), so files
+/// `yaw_bias_left_deg`, `yaw_bias_right_deg`, `h_acc_m`, `v_acc_m` when present), so files
 /// written before and after `track_id` read alike.
 pub fn read_track(path: &Path) -> Result<Vec<TrackRow>> {
     let mut r = csv::Reader::from_path(path).with_context(|| format!("open {}", path.display()))?;
@@ -44,6 +46,7 @@ pub fn read_track(path: &Path) -> Result<Vec<TrackRow>> {
     let id = column("track_id");
     let bias = column("yaw_bias_left_deg").zip(column("yaw_bias_right_deg"));
     let h_acc = column("h_acc_m");
+    let v_acc = column("v_acc_m");
     let mut rows = Vec::new();
     for (i, record) in r.records().enumerate() {
         let line = i + 2;
@@ -85,16 +88,20 @@ pub fn read_track(path: &Path) -> Result<Vec<TrackRow>> {
             Some((l, r)) if present(l) || present(r) => Some([number(l)?, number(r)?]),
             _ => None,
         };
-        let h_acc_m = match h_acc {
-            Some(c) if present(c) => Some(number(c)?),
-            _ => None,
+        let stated = |col: Option<usize>| -> Result<Option<f64>> {
+            match col {
+                Some(c) if present(c) => Ok(Some(number(c)?)),
+                _ => Ok(None),
+            }
         };
+        let (h_acc_m, v_acc_m) = (stated(h_acc)?, stated(v_acc)?);
         rows.push(TrackRow {
             t_s: number(t)?,
             track_id,
             p: [number(x)?, number(y)?, number(z)?],
             yaw_bias_deg,
             h_acc_m,
+            v_acc_m,
         });
     }
     Ok(rows)
@@ -236,6 +243,7 @@ pub fn load(recording: &Path, track: &Path, warm_up_s: f64) -> Result<Loaded> {
                     id,
                     p,
                     h_acc_m: None,
+                    v_acc_m: None,
                 });
             } else {
                 frame.dont_care.push(p);
@@ -252,6 +260,7 @@ pub fn load(recording: &Path, track: &Path, warm_up_s: f64) -> Result<Loaded> {
                 id: e.track_id,
                 p: e.p,
                 h_acc_m: e.h_acc_m,
+                v_acc_m: e.v_acc_m,
             })
             .collect();
         if let Some([bl, br]) = estimates[k].iter().find_map(|e| e.yaw_bias_deg) {

@@ -34,6 +34,8 @@ pub struct Object {
     pub p: [f64; 3],
     /// An estimate's stated horizontal accuracy (1σ, metres), when it has one.
     pub h_acc_m: Option<f64>,
+    /// An estimate's stated vertical accuracy (1σ, metres), when it has one.
+    pub v_acc_m: Option<f64>,
 }
 
 /// Everything known at one stereo pair.
@@ -119,6 +121,8 @@ pub struct PerVehicle {
     /// within it (a calibrated 2-D 1σ holds ~63 %; the match's 2 m threshold leaves
     /// the farthest out, so this is an upper bound); `None` without any.
     pub inside_h_acc: Option<f64>,
+    /// The same for the vertical error and v_acc (a calibrated 1-D 1σ holds ~68 %).
+    pub inside_v_acc: Option<f64>,
     pub id_switches: u64,
     /// The tracks that were matched to it, by id.
     pub tracks: Vec<u32>,
@@ -224,8 +228,9 @@ pub fn score(frames: &[Frame], params: Params) -> MultiScore {
     let mut within: BTreeMap<(u32, u32), u64> = BTreeMap::new();
     let (mut truth_total, mut est_total, mut dont_care) = (0u64, 0u64, 0u64);
     // Per vehicle: its figures, the sum of |error| per axis of its matched estimates,
-    // and how many of those state an h_acc and how many lie within it.
-    let mut vehicles: BTreeMap<u32, (PerVehicle, [f64; 3], [u64; 2])> = BTreeMap::new();
+    // and how many of those state an h_acc and how many lie within it, then the same
+    // for v_acc.
+    let mut vehicles: BTreeMap<u32, (PerVehicle, [f64; 3], [u64; 4])> = BTreeMap::new();
     let mut switch_events = Vec::new();
 
     for frame in frames {
@@ -308,11 +313,12 @@ pub fn score(frames: &[Frame], params: Params) -> MultiScore {
                         located_share: 0.0,
                         mae_m: None,
                         inside_h_acc: None,
+                        inside_v_acc: None,
                         id_switches: 0,
                         tracks: Vec::new(),
                     },
                     [0.0; 3],
-                    [0u64; 2],
+                    [0u64; 4],
                 )
             });
             entry.0.in_view += 1;
@@ -346,6 +352,10 @@ pub fn score(frames: &[Frame], params: Params) -> MultiScore {
                 // `d` is the horizontal distance.
                 entry.2[0] += 1;
                 entry.2[1] += u64::from(d[g][e] <= h_acc);
+            }
+            if let Some(v_acc) = est[e].v_acc_m {
+                entry.2[2] += 1;
+                entry.2[3] += u64::from((est[e].p[2] - obj.p[2]).abs() <= v_acc);
             }
         }
         clear.false_positives += est_taken.iter().filter(|&&taken| !taken).count() as u64;
@@ -398,12 +408,15 @@ pub fn score(frames: &[Frame], params: Params) -> MultiScore {
     };
     let vehicles = vehicles
         .into_values()
-        .map(|(mut v, abs, [stating, inside])| {
+        .map(|(mut v, abs, [stating, inside, stating_v, inside_v])| {
             if v.located > 0 {
                 v.mae_m = Some(abs.map(|a| a / v.located as f64));
             }
             if stating > 0 {
                 v.inside_h_acc = Some(inside as f64 / stating as f64);
+            }
+            if stating_v > 0 {
+                v.inside_v_acc = Some(inside_v as f64 / stating_v as f64);
             }
             v.located_share = v.located as f64 / v.in_view.max(1) as f64;
             v.tracks.sort_unstable();
@@ -475,6 +488,7 @@ mod tests {
             id,
             p: [x, y, 13.5],
             h_acc_m: None,
+            v_acc_m: None,
         }
     }
 
@@ -631,6 +645,7 @@ mod tests {
                     id: 1,
                     p: [0.5, -1.0, 12.5],
                     h_acc_m: Some(1.0),
+                    v_acc_m: Some(1.5),
                 }],
             ),
             frame(
@@ -639,6 +654,7 @@ mod tests {
                     id: 1,
                     p: [-0.5, 0.0, 14.5],
                     h_acc_m: Some(1.0),
+                    v_acc_m: Some(0.5),
                 }],
             ),
             frame(vec![obj(0, 0.0, 0.0)], vec![]),
@@ -650,5 +666,7 @@ mod tests {
         assert!((v.located_share - 2.0 / 3.0).abs() < 1e-12);
         // 1.12 m off against ±1 m, then 0.5 m: one of the two inside.
         assert_eq!(v.inside_h_acc, Some(0.5));
+        // 1 m low against ±1.5 m, then 1 m high against ±0.5 m.
+        assert_eq!(v.inside_v_acc, Some(0.5));
     }
 }

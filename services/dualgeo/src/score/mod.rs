@@ -139,11 +139,11 @@ pub fn table(r: &ScoreReport) -> String {
     if let Some([l, rr]) = r.yaw_bias_mae_deg {
         out += &format!("yaw-bias MAE: left {l:.2}°, right {rr:.2}°\n");
     }
-    out += "vehicle  in view  located  MAE x / y / z (m)    inside h_acc  switches  tracks\n";
+    out += "vehicle  in view  located  MAE x / y / z (m)    inside h_acc  inside v_acc  switches  tracks\n";
     for v in &s.vehicles {
         let tracks: Vec<String> = v.tracks.iter().map(u32::to_string).collect();
         out += &format!(
-            "{:>7}  {:>7}  {:>6.1}%  {:<19}  {:>12}  {:>8}  {}\n",
+            "{:>7}  {:>7}  {:>6.1}%  {:<19}  {:>12}  {:>12}  {:>8}  {}\n",
             v.id,
             v.in_view,
             100.0 * v.located_share,
@@ -151,6 +151,8 @@ pub fn table(r: &ScoreReport) -> String {
                 "{x:>5.2} / {y:>5.2} / {z:>5.2}"
             )),
             v.inside_h_acc
+                .map_or("-".to_string(), |f| format!("{:.0} %", 100.0 * f)),
+            v.inside_v_acc
                 .map_or("-".to_string(), |f| format!("{:.0} %", 100.0 * f)),
             v.id_switches,
             if tracks.is_empty() {

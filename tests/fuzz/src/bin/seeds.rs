@@ -379,6 +379,8 @@ fn tracks_snapshot() -> geolocation::tracks::TracksSnapshot {
         covariance_xy_given_biases: nalgebra::Matrix2::identity() * 0.25,
         bias_sensitivity: nalgebra::Matrix2::new(-12.0, 3.0, 5.0, 20.0),
         persistent_xy: nalgebra::Matrix2::new(0.3, 0.05, 0.05, 0.2),
+        altitude_bias_sensitivity: [4.0, -6.0],
+        persistent_z_var: 0.4,
         altitude_std_error_m: 0.5,
         colour_bgr: None,
     };
