@@ -201,6 +201,7 @@ fn main() -> Result<()> {
         let key = match &result.outcome {
             ChainOutcome::NoDetection => "no detection".to_string(),
             ChainOutcome::NotEnoughHistory { .. } => "warming up".to_string(),
+            ChainOutcome::TargetPairMismatch => "two vehicles".to_string(),
             ChainOutcome::Located(located) => {
                 let (filtered, unfiltered) = (&located.filtered, &located.unfiltered);
                 for model in located.past.iter().flat_map(|p| p.models).flatten() {

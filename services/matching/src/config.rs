@@ -173,6 +173,13 @@ pub struct MatchingConfig {
     /// ... and their colours differ by at most this much per channel (0–255; 255
     /// turns the colour test off).
     pub others_colour_gate: f64,
+    /// The target's two current detections are one vehicle only if the left one,
+    /// carried by the ground homography between the two images, lands within this
+    /// many pixels of the right one (`chain::target_pair`: its roof's parallax and
+    /// the homography's error stay within it; two cars abreast a lane apart do not).
+    /// A pair beyond it is mended from the detector's candidates or dropped. 0 turns
+    /// the check off.
+    pub target_pair_gate_px: f64,
 }
 
 impl Default for MatchingConfig {
@@ -219,6 +226,7 @@ impl Default for MatchingConfig {
             track_ransac_px: 1.0,
             others_gate_px: 12.0,
             others_colour_gate: 60.0,
+            target_pair_gate_px: 16.0,
         }
     }
 }
@@ -274,7 +282,9 @@ impl MatchingConfig {
             && self.track_ransac_px.is_finite()
             && self.others_gate_px > 0.0
             && self.others_gate_px.is_finite()
-            && (0.0..=255.0).contains(&self.others_colour_gate);
+            && (0.0..=255.0).contains(&self.others_colour_gate)
+            && self.target_pair_gate_px >= 0.0
+            && self.target_pair_gate_px.is_finite();
         if ok {
             Ok(())
         } else {

@@ -148,6 +148,12 @@ pub struct ChainCounts {
     pub refresh_not_followed: u64,
     /// Refreshes OpenCV refused (the frame is lost to the refresh, the chain goes on).
     pub refresh_failed: u64,
+    /// Matched sets whose two detections were two vehicles (`chain::target_pair`):
+    /// mended from a candidate, or dropped; and sets not checked (no homography
+    /// between the current images on this pair).
+    pub target_pair_repaired: u64,
+    pub target_pair_mismatch: u64,
+    pub target_pair_unchecked: u64,
 }
 
 impl std::ops::AddAssign for ChainCounts {
@@ -162,6 +168,9 @@ impl std::ops::AddAssign for ChainCounts {
         self.refreshes += c.refreshes;
         self.refresh_not_followed += c.refresh_not_followed;
         self.refresh_failed += c.refresh_failed;
+        self.target_pair_repaired += c.target_pair_repaired;
+        self.target_pair_mismatch += c.target_pair_mismatch;
+        self.target_pair_unchecked += c.target_pair_unchecked;
     }
 }
 

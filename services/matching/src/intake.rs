@@ -390,6 +390,9 @@ impl Intake {
             ("refreshes", c.refreshes),
             ("refresh_not_followed", c.refresh_not_followed),
             ("refresh_failed", c.refresh_failed),
+            ("target_pair_repaired", c.target_pair_repaired),
+            ("target_pair_mismatch", c.target_pair_mismatch),
+            ("target_pair_unchecked", c.target_pair_unchecked),
         ] {
             if n > 0 {
                 self.stats.count(name, n);
@@ -404,6 +407,8 @@ impl Intake {
                 self.stats.count("warming_up", 1);
                 None
             }
+            // Counted `target_pair_mismatch` with the chain's counts above.
+            MatchOutcome::TargetPairMismatch => None,
             MatchOutcome::Matched(m) => {
                 let fallbacks = m
                     .past

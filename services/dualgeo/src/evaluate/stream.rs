@@ -42,6 +42,9 @@ pub struct Pair<'a> {
     pub geometry: FrameGeometry,
     pub images: &'a [cv::Mat; 2],
     pub detections: [Option<[f64; 2]>; 2],
+    /// Every other object each detector listed, as the detection service publishes
+    /// them (matching mends a pair on two vehicles from them, `chain::target_pair`).
+    pub others: [matching::frame::Others; 2],
     /// The target inside both images and not hidden (truth, for scoring).
     pub visible: bool,
 }
@@ -185,6 +188,7 @@ impl SceneStream {
             }
         }
         let mut detections = [None, None];
+        let mut others = [matching::frame::Others::default(); 2];
         for (i, d) in detections.iter_mut().enumerate() {
             let f = &step.frames[i];
             let gate = self.predictions.for_pair(f.seq).and_then(|p| {
@@ -212,6 +216,27 @@ impl SceneStream {
                     detector.detect(i, &self.images[i], gate)?.map(|d| d.centre)
                 }
             };
+            // The candidates as the detection service lists them beside the target.
+            let mut found = Vec::new();
+            match &mut self.detector {
+                SceneDetector::Colour(detector) => {
+                    detector.candidates(&self.images[i], &mut found)?
+                }
+                SceneDetector::Motion(detector, _) => {
+                    found.extend(detector.last_movers().iter().map(|m| detection::Detection {
+                        bbox: m.bbox,
+                        centre: m.centre,
+                        confidence: 1.0,
+                    }))
+                }
+            }
+            let mut msg = shared_types::messages::DetectionMsg::default();
+            if let Some(c) = *d {
+                msg.found = 1;
+                msg.centre = c;
+            }
+            detection::candidates::fill(&mut msg, &found, &self.images[i])?;
+            others[i] = matching::frame::Others::of(&msg);
         }
         if let SceneDetector::Colour(detector) = &mut self.detector {
             let c = detector.take_counts();
@@ -228,6 +253,7 @@ impl SceneStream {
             geometry: self.geometry,
             images: &self.images,
             detections,
+            others,
             visible,
         }))
     }
@@ -307,7 +333,10 @@ impl Lane {
         let started = process_cpu_ns();
         let [(l, _), (r, _)] = self.chain.observe_pair([&inputs[0], &inputs[1]])?;
         let mut observed = [l, r];
-        let metas = [inputs[0].meta(), inputs[1].meta()];
+        let mut metas = [inputs[0].meta(), inputs[1].meta()];
+        for (meta, others) in metas.iter_mut().zip(pair.others) {
+            meta.others = others;
+        }
         let mut timing = matching::ChainTiming::default();
         let mut rejections = Vec::new();
         let outcome = self.chain.match_current(

@@ -10,6 +10,7 @@ mod landing;
 mod others;
 mod past;
 mod refresh;
+mod target_pair;
 
 use anchors::{Guide, KeyframeId, Prior, PriorKey};
 pub use landing::LandingReport;
@@ -48,8 +49,13 @@ pub struct MatchedSet {
 #[derive(Debug)]
 pub enum MatchOutcome {
     NoDetection,
-    NotEnoughHistory { past: [usize; 2] },
+    NotEnoughHistory {
+        past: [usize; 2],
+    },
     Matched(Box<MatchedSet>),
+    /// The two current detections are two vehicles and could not be mended
+    /// (`chain::target_pair`): no set.
+    TargetPairMismatch,
 }
 
 /// The consistency filter and the iteration on a matched set (filtered), and the
@@ -101,6 +107,8 @@ pub enum ChainOutcome {
     NotEnoughHistory { past: [usize; 2] },
     /// The past images matched; estimates with and without the consistency filter.
     Located(Box<Located>),
+    /// The two current detections are two vehicles (`chain::target_pair`): no set.
+    TargetPairMismatch,
 }
 
 #[derive(Debug)]
@@ -340,6 +348,7 @@ impl VisionChain {
         let outcome = match matched {
             MatchOutcome::NoDetection => ChainOutcome::NoDetection,
             MatchOutcome::NotEnoughHistory { past } => ChainOutcome::NotEnoughHistory { past },
+            MatchOutcome::TargetPairMismatch => ChainOutcome::TargetPairMismatch,
             MatchOutcome::Matched(set) => {
                 let t = Instant::now();
                 let located = estimate_matched(&set, &self.estimator);
@@ -601,11 +610,23 @@ impl VisionChain {
         self.links
             .retain(|&(uav, seq), _| rings[uav].iter().any(|kf| kf.seq == seq));
 
-        Ok(MatchOutcome::Matched(Box::new(MatchedSet {
+        let mut set = MatchedSet {
             current: current_obs,
             past_observations: past_obs,
             past,
-        })))
+        };
+        if self.config.target_pair_gate_px > 0.0 {
+            match self.check_target_pair(current, &mut set) {
+                target_pair::PairCheck::Consistent => {}
+                target_pair::PairCheck::Unchecked => self.counts.target_pair_unchecked += 1,
+                target_pair::PairCheck::Repaired { .. } => self.counts.target_pair_repaired += 1,
+                target_pair::PairCheck::Mismatch => {
+                    self.counts.target_pair_mismatch += 1;
+                    return Ok(MatchOutcome::TargetPairMismatch);
+                }
+            }
+        }
+        Ok(MatchOutcome::Matched(Box::new(set)))
     }
 }
 

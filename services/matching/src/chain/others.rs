@@ -13,12 +13,12 @@
 //! The measured poses are not used: a 20° yaw bias moves a ground point by tens of
 //! metres, while the homography is fitted on the images themselves.
 
+use super::target_pair::apply;
 use super::{MatchedSet, VisionChain};
 use crate::epipolar::{transfer_point, ImageBounds};
 use crate::frame::FrameMeta;
-use nalgebra::{Matrix3, Vector3};
+use nalgebra::Matrix3;
 use shared_types::assignment;
-use shared_types::conventions::Uav;
 
 /// Another vehicle of the pair, in ideal pinhole pixels.
 #[derive(Debug, Clone, PartialEq)]
@@ -46,11 +46,6 @@ pub struct OthersOutcome {
 /// A target residual beyond this (px) means the composed homography does not hold
 /// for this pair: no pairing rather than a wrong one.
 const MAX_TARGET_RESIDUAL_PX: f64 = 40.0;
-
-fn apply(h: &Matrix3<f64>, p: [f64; 2]) -> Option<[f64; 2]> {
-    let q = h * Vector3::new(p[0], p[1], 1.0);
-    (q.z.abs() > 1e-12).then(|| [q.x / q.z, q.y / q.z])
-}
 
 /// An object in one current image: ideal pixel and colour.
 type Seen = ([f64; 2], [u8; 3]);
@@ -162,31 +157,16 @@ impl VisionChain {
         out
     }
 
-    /// The ground homography from the current left image to the current right one,
-    /// through the keyframe both were fitted to on this pair with the most inliers,
-    /// shifted by the target's residual; `None` without one or when the target lies
-    /// more than [`MAX_TARGET_RESIDUAL_PX`] off it.
+    /// The ground homography from the current left image to the current right one
+    /// (the first of [`VisionChain::ground_homographies`]) shifted by the target's residual;
+    /// `None` without one or when the target lies more than
+    /// [`MAX_TARGET_RESIDUAL_PX`] off it.
     fn left_to_right(
         &self,
         current: [&FrameMeta; 2],
         matched: &MatchedSet,
     ) -> Option<Matrix3<f64>> {
-        let fresh = |side: usize, uav: Uav, seq: u64| {
-            self.priors
-                .get(&(side, uav.index(), seq))
-                .filter(|p| p.t_s == current[side].t_s)
-                .map(|p| p.homography)
-        };
-        let best = matched
-            .past
-            .iter()
-            .filter_map(|m| {
-                let hl = fresh(0, m.uav, m.seq)?;
-                let hr = fresh(1, m.uav, m.seq)?;
-                Some((m.inliers[0].min(m.inliers[1]), hl, hr))
-            })
-            .max_by_key(|(inliers, _, _)| *inliers)?;
-        let h = best.2.try_inverse()? * best.1;
+        let h = *self.ground_homographies(current, matched).first()?;
         let target = [0, 1].map(|side| {
             let p = matched.current[side].pixel;
             [p.x, p.y]
