@@ -19,6 +19,7 @@ use std::process::Command;
 fn a_look_alike_in_one_view_is_not_the_targets_estimate() {
     let dir = Scratch::new("look-alike");
     let out = dir.s("eval");
+    let flights = dir.s("flights");
     let o = Command::new(env!("CARGO_BIN_EXE_dualgeo"))
         .args([
             "evaluate",
@@ -31,6 +32,8 @@ fn a_look_alike_in_one_view_is_not_the_targets_estimate() {
             "10",
             "--out",
             &out,
+            "--keep-flights",
+            &flights,
         ])
         .output()
         .expect("spawn dualgeo");
@@ -52,6 +55,17 @@ fn a_look_alike_in_one_view_is_not_the_targets_estimate() {
     let bias = run["yaw_bias_mae_deg"].as_array().expect("bias MAE");
     let bias: Vec<f64> = bias.iter().filter_map(|b| b.as_f64()).collect();
     assert!(located >= 0.8, "target located in {located} of its pairs");
+    // And it was the mending that did it.
+    let counters = json(
+        &std::path::Path::new(&flights)
+            .join("suite_traffic-003")
+            .join("run")
+            .join("counters.json"),
+    );
+    let mended = counters["matching.target_pair_repaired"]
+        .as_u64()
+        .unwrap_or(0);
+    assert!(mended > 0, "no pair mended: {counters}");
     assert!(
         bias.len() == 2 && bias.iter().all(|b| *b < 4.0),
         "yaw-bias MAE {bias:?}°"

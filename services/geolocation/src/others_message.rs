@@ -76,8 +76,12 @@ fn observations_of(
 /// (x, y) block, and the biases' error carried into the difference. The biases'
 /// error does not cancel there: it turns each UAV's rays about the UAV, so the
 /// difference moves by (J_vehicle − J_target) δψ, J the fixes' `bias_sensitivity`;
-/// its covariance is J_d P_b J_dᵀ with P_b the target filter's. The same for z: the
-/// target's altitude variance and the biases' share of the difference's z.
+/// with the target's error, correlated with the biases' in the filter, its covariance
+/// is M C Mᵀ, M = [I₂ | J_d] and C the filter's (x, y, δψ_L, δψ_R) covariance. The
+/// same for z: the target's altitude variance and the biases' share of the
+/// difference's z (the filter keeps no z–bias covariance). The target's (x, y) block
+/// is in the fix's covariance too, which the tracks' learnt noise scale fits to the
+/// innovations (it sits at its floor: the double count there is small).
 fn locate_relative(
     set: &ObservationSetMsg,
     other: &OtherTarget,
@@ -90,6 +94,8 @@ fn locate_relative(
     let reference = locate_with_biases(&target, biases, config).map_err(|e| e.kind())?;
     let c = &msg.covariance;
     let target_xy = Matrix2::new(c[0], c[1], c[4], c[5]);
+    // (x, y, δψ_L, δψ_R) of the target's filter, row-major.
+    let target_and_biases = nalgebra::Matrix4::from_row_slice(c);
     let d = fix.position - reference.position;
     let position = nalgebra::Point3::new(
         msg.position[0] + d.x,
@@ -97,14 +103,19 @@ fn locate_relative(
         msg.position[2] + d.z,
     );
     let j = fix.bias_sensitivity - reference.bias_sensitivity;
-    let persistent_xy = target_xy + j * biases.covariance * j.transpose();
+    // Its error e_target + J_d e_biases, the two correlated in the filter: with
+    // M = [I₂ | J_d], M C Mᵀ over the filter's (x, y, δψ_L, δψ_R) covariance C.
+    let mut m = nalgebra::Matrix2x4::zeros();
+    m.fixed_view_mut::<2, 2>(0, 0).fill_with_identity();
+    m.fixed_view_mut::<2, 2>(0, 2).copy_from(&j);
+    let persistent_xy = m * target_and_biases * m.transpose();
     let jz: [f64; 2] = std::array::from_fn(|k| {
         fix.altitude_bias_sensitivity[k] - reference.altitude_bias_sensitivity[k]
     });
     let jz_v = Vector2::from(jz);
     let persistent_z_var = msg.altitude_std_error_m.powi(2) + jz_v.dot(&(biases.covariance * jz_v));
     if !persistent_xy.iter().all(|v| v.is_finite()) || !persistent_z_var.is_finite() {
-        return Err("non_finite");
+        return Err("non_finite_result");
     }
     Ok(OtherFix {
         position,

@@ -348,12 +348,14 @@ impl Tracks {
             let p = Matrix4::from_row_slice(&t.p);
             let symmetric = (p - p.transpose()).abs().max() <= 1e-9 * (1.0 + p.abs().max());
             let persistent = Matrix2::from_row_slice(&t.persistent_xy);
+            // Symmetric, positive semi-definite, and no larger than a track could ever
+            // state (`delete_sigma_m` is tens of metres; 1e8 m² is 10 km).
             let persistent_ok = (persistent - persistent.transpose()).abs().max()
                 <= 1e-9 * (1.0 + persistent.abs().max())
-                && persistent[(0, 0)] >= 0.0
-                && persistent[(1, 1)] >= 0.0;
+                && (0..2).all(|k| (0.0..=1e8).contains(&persistent[(k, k)]))
+                && persistent[(0, 1)].powi(2) <= persistent[(0, 0)] * persistent[(1, 1)];
             let in_range = t.z_var >= 0.0
-                && t.persistent_z_var >= 0.0
+                && (0.0..=1e8).contains(&t.persistent_z_var)
                 && (0..4).all(|k| p[(k, k)] >= 0.0)
                 && symmetric
                 && persistent_ok
@@ -1012,6 +1014,16 @@ mod tests {
         let mut bad = snap.clone();
         bad.tracks[0].persistent_z_var = -0.5;
         assert!(Tracks::restore(config, &bad).is_err());
+        // Not symmetric; not positive semi-definite.
+        let mut bad = snap.clone();
+        bad.tracks[0].persistent_xy = [1.0, 0.5, 0.0, 1.0];
+        assert!(Tracks::restore(config, &bad).is_err());
+        let mut bad = snap.clone();
+        bad.tracks[0].persistent_xy = [1.0, 10.0, 10.0, 1.0];
+        assert!(Tracks::restore(config, &bad).is_err());
+        let mut good = snap.clone();
+        good.tracks[0].persistent_xy = [1.0, 0.5, 0.5, 1.0];
+        assert!(Tracks::restore(config, &good).is_ok());
         let mut bad = snap;
         bad.next_id = u32::MAX;
         assert!(Tracks::restore(config, &bad).is_err());

@@ -175,11 +175,12 @@ pub struct MatchingConfig {
     pub others_colour_gate: f64,
     /// The target's two current detections are one vehicle only if the left one,
     /// carried by the ground homography between the two images, lands within this
-    /// many pixels of the right one (`chain::target_pair`: its roof's parallax and
-    /// the homography's error stay within it; two cars abreast a lane apart do not).
-    /// A pair beyond it is mended from the detector's candidates or dropped. 0 turns
-    /// the check off.
-    pub target_pair_gate_px: f64,
+    /// angle of the right one, milliradians (× the right camera's focal length in
+    /// pixels / 1000: 16 px at 640 × 480 and 60°, 48 px at 1920 px and 60°;
+    /// `chain::target_pair`: a car roof's parallax and the homography's error stay
+    /// within it, two cars abreast a lane apart do not). A pair beyond it is mended
+    /// from the detector's candidates or dropped. 0 turns the check off.
+    pub target_pair_gate_mrad: f64,
 }
 
 impl Default for MatchingConfig {
@@ -226,7 +227,7 @@ impl Default for MatchingConfig {
             track_ransac_px: 1.0,
             others_gate_px: 12.0,
             others_colour_gate: 60.0,
-            target_pair_gate_px: 16.0,
+            target_pair_gate_mrad: 29.0,
         }
     }
 }
@@ -283,8 +284,8 @@ impl MatchingConfig {
             && self.others_gate_px > 0.0
             && self.others_gate_px.is_finite()
             && (0.0..=255.0).contains(&self.others_colour_gate)
-            && self.target_pair_gate_px >= 0.0
-            && self.target_pair_gate_px.is_finite();
+            && self.target_pair_gate_mrad >= 0.0
+            && self.target_pair_gate_mrad.is_finite();
         if ok {
             Ok(())
         } else {

@@ -154,6 +154,8 @@ pub struct ChainCounts {
     pub target_pair_repaired: u64,
     pub target_pair_mismatch: u64,
     pub target_pair_unchecked: u64,
+    /// Past images whose transfer failed with a mended pair's pixels.
+    pub target_pair_past_dropped: u64,
 }
 
 impl std::ops::AddAssign for ChainCounts {
@@ -171,6 +173,7 @@ impl std::ops::AddAssign for ChainCounts {
         self.target_pair_repaired += c.target_pair_repaired;
         self.target_pair_mismatch += c.target_pair_mismatch;
         self.target_pair_unchecked += c.target_pair_unchecked;
+        self.target_pair_past_dropped += c.target_pair_past_dropped;
     }
 }
 

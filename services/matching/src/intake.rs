@@ -393,6 +393,7 @@ impl Intake {
             ("target_pair_repaired", c.target_pair_repaired),
             ("target_pair_mismatch", c.target_pair_mismatch),
             ("target_pair_unchecked", c.target_pair_unchecked),
+            ("target_pair_past_dropped", c.target_pair_past_dropped),
         ] {
             if n > 0 {
                 self.stats.count(name, n);

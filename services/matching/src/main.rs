@@ -33,7 +33,10 @@
 //! level), and the adaptations of
 //! [`matching::ChainCounts`]: `retried_looser_ratio`, `retry_rescued`,
 //! `fast_threshold_lowered`, `keypoints_outside_lens`, `detections_outside_lens`,
-//! `rectified_frames` (ORB on a tilted camera's straight-down view, `matching::rectify`);
+//! `rectified_frames` (ORB on a tilted camera's straight-down view, `matching::rectify`),
+//! `target_pair_repaired`, `target_pair_mismatch`, `target_pair_unchecked` and
+//! `target_pair_past_dropped` (the target's two views checked against each other,
+//! `matching::chain::target_pair`);
 //! `keyframes_restored`, `checkpoint_refused`, `checkpoint_failed`; `segments` (the
 //! stream jumped, a looped recording starting over: trackers, rings and refreshes
 //! started over; a pair of the old segment completed later is `pairs_abandoned`);

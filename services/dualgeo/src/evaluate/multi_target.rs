@@ -23,7 +23,7 @@ use std::time::Instant;
 pub type VehicleFigures = (u32, f64, Option<[f64; 3]>, Option<f64>, Option<f64>);
 
 /// Bump when a change makes kept runs stale (the chain, the scorer, the seeding).
-const RUN_FORMAT: u32 = 13;
+const RUN_FORMAT: u32 = 14;
 
 /// What the evaluation runs.
 #[derive(Debug, Clone)]

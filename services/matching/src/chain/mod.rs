@@ -43,6 +43,10 @@ pub struct MatchedSet {
     /// Past images that got a corresponding point (same order as `past`).
     pub past_observations: Vec<Observation>,
     pub past: Vec<PastMatch>,
+    /// When the pair was mended (`target_pair`): the side, and its detection's ideal
+    /// pixel before (another vehicle, which the other-vehicle pairing lists in place
+    /// of the candidate taken for the target).
+    pub mended: Option<(usize, [f64; 2])>,
 }
 
 /// Matching's answer for one pair.
@@ -614,12 +618,16 @@ impl VisionChain {
             current: current_obs,
             past_observations: past_obs,
             past,
+            mended: None,
         };
-        if self.config.target_pair_gate_px > 0.0 {
+        if self.config.target_pair_gate_mrad > 0.0 {
             match self.check_target_pair(current, &mut set) {
                 target_pair::PairCheck::Consistent => {}
                 target_pair::PairCheck::Unchecked => self.counts.target_pair_unchecked += 1,
-                target_pair::PairCheck::Repaired { .. } => self.counts.target_pair_repaired += 1,
+                target_pair::PairCheck::Repaired { past_dropped, .. } => {
+                    self.counts.target_pair_repaired += 1;
+                    self.counts.target_pair_past_dropped += past_dropped as u64;
+                }
                 target_pair::PairCheck::Mismatch => {
                     self.counts.target_pair_mismatch += 1;
                     return Ok(MatchOutcome::TargetPairMismatch);

@@ -96,7 +96,7 @@ impl VisionChain {
     /// pair, just matched by [`VisionChain::match_current`]).
     pub fn others(&self, current: [&FrameMeta; 2], matched: &MatchedSet) -> OthersOutcome {
         let mut out = OthersOutcome::default();
-        let sides: [Vec<Seen>; 2] = current.map(|f| {
+        let mut sides: [Vec<Seen>; 2] = current.map(|f| {
             f.others
                 .as_slice()
                 .iter()
@@ -108,6 +108,17 @@ impl VisionChain {
                 })
                 .collect()
         });
+        // A mended pair (`target_pair`): the candidate taken for the target is the
+        // target; the vehicle the detector had taken is another.
+        if let Some((side, before)) = matched.mended {
+            let now = matched.current[side].pixel;
+            if let Some(seen) = sides[side]
+                .iter_mut()
+                .find(|(p, _)| (p[0] - now.x).hypot(p[1] - now.y) < 1e-6)
+            {
+                seen.0 = before;
+            }
+        }
         if sides[0].is_empty() || sides[1].is_empty() {
             out.unpaired = sides[0].len() + sides[1].len();
             return out;

@@ -11,11 +11,14 @@
 //!
 //! **The check (a choice).** The ground homography from the current left image to
 //! the current right one (`H_LR = H_R⁻¹ · H_L`, through the keyframe both were
-//! fitted to on this pair with the most inliers) is fitted on the images alone, so a
-//! yaw bias does not enter it. The left detection carried by it must land within
-//! `target_pair_gate_px` of the right one; what is left between two views of one
-//! vehicle is its roof's height parallax (f · B · h / Z², 3–7 px for a car on the
-//! suite's scenes) and the homography's error. Measured on five recordings
+//! fitted to on this pair) is fitted on the images alone, so a yaw bias does not
+//! enter it. The left detection carried by it must land within the gate of the right
+//! one under at least one keyframe's homography (one fitted on few inliers was seen
+//! 19–29 px off); the gate is an angle, `target_pair_gate_mrad` (29 mrad: 16 px at
+//! 640 × 480 and 60°), times the right camera's focal length, so it scales with the
+//! resolution as the parallax does. What is left between two views of one vehicle
+//! is its roof's height parallax (f · B · h / Z², 3–7 px for a car on the suite's
+//! scenes at 640 × 480) and the homography's error. Measured on five recordings
 //! (`multi_town`, `suite_traffic`), every pair on one vehicle was within 12 px and
 //! every pair on two was 24 px or more apart (two cars abreast a lane apart).
 //!
@@ -25,9 +28,15 @@
 //! images' points are then transferred again through the same fundamental matrices
 //! (eq. 27–28). Otherwise (no candidate, or both sides have one: each camera sees
 //! both cars and nothing here says which is the target) the pair gives no set: no
-//! estimate is better than one of two vehicles. Counted `target_pair_repaired` and
-//! `target_pair_mismatch`; a pair without a shared keyframe on this pair is not
-//! checked (`target_pair_unchecked`).
+//! estimate is better than one of two vehicles. Counted `target_pair_repaired` (and
+//! `target_pair_past_dropped`, past images whose transfer failed with the mended
+//! pixels) and `target_pair_mismatch`; a pair without a shared keyframe on this pair
+//! is not checked (`target_pair_unchecked`). After a mend the other-vehicle pairing
+//! lists the vehicle the detector had taken in place of the candidate now the target.
+//!
+//! Candidates are not compared by colour: the one taken lies within the gate of
+//! where the other view's detection maps, nearer than any other (two cars abreast a
+//! lane apart are 24 px or more apart there).
 
 use super::{MatchedSet, VisionChain};
 use crate::epipolar::{transfer_point, ImageBounds};
@@ -43,8 +52,9 @@ pub enum PairCheck {
     /// No homography between the current images on this pair: not checked.
     Unchecked,
     /// One side's detection was replaced by its candidate where the other side's
-    /// maps (0 left, 1 right).
-    Repaired { side: usize },
+    /// maps (0 left, 1 right); `past_dropped` past images whose transfer then failed
+    /// left the set.
+    Repaired { side: usize, past_dropped: usize },
     /// Two vehicles, and no single repair: the set is dropped.
     Mismatch,
 }
@@ -133,7 +143,7 @@ impl VisionChain {
         current: [&FrameMeta; 2],
         set: &mut MatchedSet,
     ) -> PairCheck {
-        let gate = self.config.target_pair_gate_px;
+        let gate = self.config.target_pair_gate_mrad / 1000.0 * current[1].intrinsics.fx;
         let homographies = self.ground_homographies(current, set);
         let target = [0, 1].map(|side| {
             let p = set.current[side].pixel;
@@ -164,22 +174,27 @@ impl VisionChain {
                 })
                 .collect::<Vec<_>>()
         });
-        let Some((side, pixel)) = repair(&homographies[0], target, &candidates, gate) else {
+        // The first homography (most inliers first) that allows a single repair, and
+        // the mended pair must hold under most of them.
+        let mended = homographies.iter().find_map(|h| {
+            let (side, pixel) = repair(h, target, &candidates, gate)?;
+            let mut pixels = target;
+            pixels[side] = pixel;
+            let holding = homographies
+                .iter()
+                .filter(|h| residual(h, pixels).is_some_and(|r| r <= gate))
+                .count();
+            (2 * holding > homographies.len()).then_some((side, pixel, pixels))
+        });
+        let Some((side, pixel, pixels)) = mended else {
             return PairCheck::Mismatch;
         };
-        let mut pixels = target;
-        pixels[side] = pixel;
-        // The mended pair must hold under every keyframe's homography.
-        let holds = homographies
-            .iter()
-            .all(|h| residual(h, pixels).is_some_and(|r| r <= gate));
-        if !holds {
-            return PairCheck::Mismatch;
-        }
+        set.mended = Some((side, target[side]));
         set.current[side].pixel = Vector2::new(pixel[0], pixel[1]);
         // The past images' points again, through the same F_Ln and F_Rn; a past image
         // whose transfer now fails leaves the set.
-        let mut kept = Vec::with_capacity(set.past.len());
+        let before = set.past.len();
+        let mut kept = Vec::with_capacity(before);
         for (mut m, mut o) in set.past.drain(..).zip(set.past_observations.drain(..)) {
             let Some(kf) = self.rings[m.uav.index()].iter().find(|k| k.seq == m.seq) else {
                 continue;
@@ -205,7 +220,10 @@ impl VisionChain {
             }
         }
         (set.past, set.past_observations) = kept.into_iter().unzip();
-        PairCheck::Repaired { side }
+        PairCheck::Repaired {
+            side,
+            past_dropped: before - set.past.len(),
+        }
     }
 }
 
