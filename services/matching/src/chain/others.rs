@@ -15,7 +15,6 @@
 
 use super::target_pair::apply;
 use super::{MatchedSet, VisionChain};
-use crate::epipolar::{transfer_point, ImageBounds};
 use crate::frame::FrameMeta;
 use nalgebra::Matrix3;
 use shared_types::assignment;
@@ -140,24 +139,7 @@ impl VisionChain {
             let past = matched
                 .past
                 .iter()
-                .map(|m| {
-                    let kf = self.rings[m.uav.index()].iter().find(|k| k.seq == m.seq)?;
-                    let bounds = ImageBounds {
-                        intrinsics: &kf.intrinsics,
-                        distortion: &kf.distortion,
-                        width: kf.width,
-                        height: kf.height,
-                    };
-                    transfer_point(
-                        &m.fundamental[0],
-                        current_px[0],
-                        &m.fundamental[1],
-                        current_px[1],
-                        &bounds,
-                        &self.config,
-                    )
-                    .ok()
-                })
+                .map(|m| self.transfer_into(m, current_px))
                 .collect();
             out.targets.push(OtherPixels {
                 current: current_px,

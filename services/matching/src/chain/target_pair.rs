@@ -38,7 +38,7 @@
 //! where the other view's detection maps, nearer than any other (two cars abreast a
 //! lane apart are 24 px or more apart there).
 
-use super::{MatchedSet, VisionChain};
+use super::{MatchedSet, PastMatch, VisionChain};
 use crate::epipolar::{transfer_point, ImageBounds};
 use crate::frame::FrameMeta;
 use nalgebra::{Matrix3, Vector2, Vector3};
@@ -106,6 +106,28 @@ fn repair(
 }
 
 impl VisionChain {
+    /// A point seen at `current` (left, right ideal pixels) carried into past image
+    /// `m` through its F_Ln and F_Rn (eq. 27–28); `None` when the past image has
+    /// left the ring or the transfer fails.
+    pub(super) fn transfer_into(&self, m: &PastMatch, current: [[f64; 2]; 2]) -> Option<[f64; 2]> {
+        let kf = self.rings[m.uav.index()].iter().find(|k| k.seq == m.seq)?;
+        let bounds = ImageBounds {
+            intrinsics: &kf.intrinsics,
+            distortion: &kf.distortion,
+            width: kf.width,
+            height: kf.height,
+        };
+        transfer_point(
+            &m.fundamental[0],
+            current[0],
+            &m.fundamental[1],
+            current[1],
+            &bounds,
+            &self.config,
+        )
+        .ok()
+    }
+
     /// The ground homographies from the current left image to the current right one,
     /// one through each keyframe both were fitted to on this pair (`H_R⁻¹ · H_L`),
     /// the most inliers first.
@@ -196,24 +218,7 @@ impl VisionChain {
         let before = set.past.len();
         let mut kept = Vec::with_capacity(before);
         for (mut m, mut o) in set.past.drain(..).zip(set.past_observations.drain(..)) {
-            let Some(kf) = self.rings[m.uav.index()].iter().find(|k| k.seq == m.seq) else {
-                continue;
-            };
-            let bounds = ImageBounds {
-                intrinsics: &kf.intrinsics,
-                distortion: &kf.distortion,
-                width: kf.width,
-                height: kf.height,
-            };
-            let moved = transfer_point(
-                &m.fundamental[0],
-                pixels[0],
-                &m.fundamental[1],
-                pixels[1],
-                &bounds,
-                &self.config,
-            );
-            if let Ok(p) = moved {
+            if let Some(p) = self.transfer_into(&m, pixels) {
                 m.pixel = p;
                 o.pixel = Vector2::new(p[0], p[1]);
                 kept.push((m, o));
