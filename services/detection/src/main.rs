@@ -341,11 +341,7 @@ impl Detecting {
                     None => Ok(()),
                 }),
             Chosen::Motion(d) => {
-                found.extend(d.last_movers().iter().map(|m| detection::Detection {
-                    bbox: m.bbox,
-                    centre: m.centre,
-                    confidence: 1.0,
-                }));
+                found.extend(d.last_movers().iter().map(|m| m.as_detection()));
                 Ok(())
             }
             // The model's other boxes are not kept yet.

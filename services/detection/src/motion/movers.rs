@@ -39,6 +39,17 @@ pub struct Mover {
     pub bgr: [f64; 3],
 }
 
+impl Mover {
+    /// As a candidate beside the target (several targets).
+    pub fn as_detection(&self) -> crate::Detection {
+        crate::Detection {
+            bbox: self.bbox,
+            centre: self.centre,
+            confidence: 1.0,
+        }
+    }
+}
+
 /// Reusable buffers for the differences.
 #[derive(Default)]
 pub struct Differencer {

@@ -223,11 +223,7 @@ impl SceneStream {
                     detector.candidates(&self.images[i], &mut found)?
                 }
                 SceneDetector::Motion(detector, _) => {
-                    found.extend(detector.last_movers().iter().map(|m| detection::Detection {
-                        bbox: m.bbox,
-                        centre: m.centre,
-                        confidence: 1.0,
-                    }))
+                    found.extend(detector.last_movers().iter().map(|m| m.as_detection()))
                 }
             }
             let mut msg = shared_types::messages::DetectionMsg::default();
