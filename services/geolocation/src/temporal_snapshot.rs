@@ -9,11 +9,15 @@
 //! `temporal.rs`), so the covariance, hence h_acc, grows with what was lost.
 //!
 //! While the start's bias hypotheses are still open (`hypotheses.rs`, the first
-//! seconds of a track) the snapshot holds the leading one only: a service restarted
-//! then resumes that hypothesis alone, with its own covariance.
+//! seconds of a track, longer where the rays could fit several) the snapshot holds
+//! the leading one only, its covariance widened by how far the others' means lie
+//! (Σ wᵢ dᵢ dᵢᵀ over the core states, dᵢ the mean's distance from the leader's): a
+//! service restarted then resumes that hypothesis alone, and states at least the
+//! spread the bank stated (a leader alone with its own covariance knows nothing of
+//! the hypotheses it outlived).
 
-use crate::hypotheses::Hypothesis;
-use crate::temporal::{ImageId, TemporalEstimator, REOPEN_HOLD, SLOT};
+use crate::hypotheses::{weights, Hypothesis};
+use crate::temporal::{ImageId, TemporalEstimator, CORE, REOPEN_HOLD, SLOT};
 use crate::{EstimatorConfig, EstimatorError};
 use nalgebra::{DMatrix, DVector, Vector2};
 use shared_types::conventions::Uav;
@@ -51,6 +55,16 @@ impl TemporalEstimator {
             };
         };
         let (t, s, p) = &leader.state;
+        let mut p = p.clone();
+        if self.bank.len() > 1 {
+            let w = weights(&self.bank.iter().map(|h| h.log_weight).collect::<Vec<_>>());
+            for (h, w) in self.bank.iter().zip(w) {
+                let d = (&h.state.1 - s).rows(0, CORE).into_owned();
+                let spread = &d * d.transpose() * w;
+                let mut block = p.view_mut((0, 0), (CORE, CORE));
+                block += spread;
+            }
+        }
         TemporalSnapshot {
             core: Some(FilterState {
                 t_s: *t,
@@ -174,6 +188,9 @@ mod tests {
         let mut original = TemporalEstimator::new(EstimatorConfig::default()).unwrap();
         let mut id = 0;
         feed(&mut original, &mut rng, 5.0, 10.0, &mut id).unwrap();
+        // One hypothesis left: the snapshot holds all there is (with several it holds
+        // the leader, widened: `a_restore_while_the_bank_is_open_keeps_its_spread`).
+        assert_eq!(original.hypotheses(), 1);
         let snap = original.snapshot();
         // Through the checkpoint file's encoding, as the service does.
         let bytes = shared_types::checkpoint::encode(1, &snap).unwrap();
@@ -186,6 +203,31 @@ mod tests {
         let a = feed(&mut original, &mut rng_a, 15.0, 2.0, &mut id_a).unwrap();
         let b = feed(&mut restored, &mut rng_b, 15.0, 2.0, &mut id_b).unwrap();
         assert_eq!(a, b);
+    }
+
+    /// Restarted while the start's hypotheses are open, the filter resumes the leader
+    /// with the others' spread added to its core covariance, not the leader's own.
+    #[test]
+    fn a_restore_while_the_bank_is_open_keeps_its_spread() {
+        let mut rng = rand::rngs::StdRng::seed_from_u64(7);
+        let mut filter = TemporalEstimator::new(EstimatorConfig::default()).unwrap();
+        let mut id = 0;
+        feed(&mut filter, &mut rng, 5.0, 0.5, &mut id).unwrap();
+        assert!(filter.hypotheses() > 1, "the bank has closed already");
+        let own = filter.bank[0].state.2.clone();
+        let restored =
+            TemporalEstimator::restore(EstimatorConfig::default(), &filter.snapshot()).unwrap();
+        assert_eq!(restored.hypotheses(), 1);
+        let p = &restored.bank[0].state.2;
+        let h2 = |m: &DMatrix<f64>| m[(0, 0)] + m[(1, 1)];
+        assert!(
+            h2(p) > h2(&own),
+            "{} vs the leader's own {}",
+            h2(p),
+            h2(&own)
+        );
+        // Widened by a positive semi-definite spread: every variance at least its own.
+        assert!((0..p.nrows()).all(|i| p[(i, i)] >= own[(i, i)]));
     }
 
     #[test]
