@@ -58,12 +58,15 @@ impl TemporalEstimator {
         let mut p = p.clone();
         if self.bank.len() > 1 {
             let w = weights(&self.bank.iter().map(|h| h.log_weight).collect::<Vec<_>>());
+            // Core rows only: hypotheses may differ in their keyframe slots.
+            let leader_core = s.rows(0, CORE);
+            let mut spread = DMatrix::<f64>::zeros(CORE, CORE);
             for (h, w) in self.bank.iter().zip(w) {
-                let d = (&h.state.1 - s).rows(0, CORE).into_owned();
-                let spread = &d * d.transpose() * w;
-                let mut block = p.view_mut((0, 0), (CORE, CORE));
-                block += spread;
+                let d = h.state.1.rows(0, CORE) - leader_core;
+                spread += &d * d.transpose() * w;
             }
+            let mut block = p.view_mut((0, 0), (CORE, CORE));
+            block += spread;
         }
         TemporalSnapshot {
             core: Some(FilterState {
