@@ -16,9 +16,10 @@
 //! rays meet under its own biases, with that point's own covariance, and a component
 //! whose point curves within it is split into a finer grid while the bank has room
 //! (`start_prior.rs`). Every update weighs each hypothesis by the
-//! likelihood of its innovations (raised to `likelihood_temper`, 1 by default: Bayes'
-//! rule; a tempered one was measured, docs/temporal.md "Tempered hypothesis
-//! weights"); one far behind the leader is dropped, two that have come together are
+//! likelihood of its innovations raised to `likelihood_temper` (0.3 by default: a
+//! tempered likelihood, as successive updates share their past images' errors; 1 is
+//! Bayes' rule; docs/temporal.md "Tempered hypothesis weights"); one far behind the
+//! leader is dropped, two that have come together are
 //! merged (moments matched), so the bank is one filter again within a few seconds. Until then the estimate is the leader's, its covariance the mixture's
 //! spread about it: the stated accuracy includes the hypotheses still open. This is
 //! the Gaussian-sum filter of Alspach and Sorenson (1972), used only where the
