@@ -6,7 +6,8 @@
 //! by turning the biases 20–40°, and the estimate was 10–16 m off while stating ±1.5 m
 //! (the target located in 1 % of its pairs over 24 s). Matching now finds the target
 //! among the right camera's candidates where the left detection maps, and mends the
-//! pair. Through the real processes (`dualgeo evaluate --multi-target` runs
+//! pair; the two sets before it can (no keyframe shared yet, unchecked) no longer
+//! re-open a yaw bias. Through the real processes (`dualgeo evaluate --multi-target` runs
 //! `dualgeo simulate`'s renderer, `dualgeo run` and `dualgeo score`).
 
 #[path = "support/scratch.rs"]
@@ -54,7 +55,11 @@ fn a_look_alike_in_one_view_is_not_the_targets_estimate() {
     let located = target[1].as_f64().expect("located share");
     let bias = run["yaw_bias_mae_deg"].as_array().expect("bias MAE");
     let bias: Vec<f64> = bias.iter().filter_map(|b| b.as_f64()).collect();
-    assert!(located >= 0.8, "target located in {located} of its pairs");
+    // 0.80 with the pair check alone; 0.975 since two unchecked sets on the
+    // look-alike (4.47 and 4.50 s) no longer re-open the right bias (the filter's
+    // drift monitor winsorises each ray, `geolocation::temporal`; 0.06 without it at
+    // the default tempered weights).
+    assert!(located >= 0.9, "target located in {located} of its pairs");
     // And it was the mending that did it.
     let counters = json(
         &std::path::Path::new(&flights)
