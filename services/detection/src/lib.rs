@@ -6,6 +6,7 @@
 //! answers, and the motion detector ([`motion`]: whatever moves against the ground).
 //! `[detection] kind` chooses ([`config`]). Detectors see pixels only, never truth.
 
+pub mod camera_swing;
 pub mod candidates;
 mod colour_blob;
 pub mod config;

@@ -14,6 +14,8 @@
 //! prediction and none inside: a look-alike not taken for the target; the service
 //! subscribes to the estimates for it, `detection::prediction_gate`), `reacquired`
 //! (detections after a camera found nothing in its gates for `reacquire_after_s`),
+//! `swings_followed` (frames whose measured camera swing beyond its attitude noise
+//! moved the track's hint, `detection::camera_swing`),
 //! `gated_frames` (frames detected with a gate), `frames_late` (started after the
 //! frame's deadline, one frame period after its moment: `shared_types::deadline`) and
 //! `frames_shed` (late with a newer frame of the same UAV waiting: skipped, no message),
@@ -30,6 +32,7 @@
 
 use anyhow::{Context, Result};
 use clap::Parser;
+use detection::camera_swing::CameraView;
 use detection::config::{DetectionConfig, DetectorKind};
 use detection::frame_view::frame_mat;
 use detection::learned::LearnedDetector;
@@ -248,6 +251,7 @@ impl Detecting {
                 header.t_s,
                 mat,
                 gate_of(&self.predictions, &header, &self.gate_config, stats),
+                view_of(&header),
             ),
             // The learned detector is not gated by the filter's prediction yet.
             Chosen::Learned(d) => d.detect(uav, mat),
@@ -287,6 +291,7 @@ impl Detecting {
                 stats.count("window_misses", counts.window_misses);
                 stats.count("gated_out", counts.gated_out);
                 stats.count("reacquired", counts.reacquired);
+                stats.count("swings_followed", counts.swings_followed);
             }
             Chosen::Learned(d) => {
                 let counts = d.take_counts();
@@ -360,6 +365,16 @@ impl Detecting {
             }
         }
     }
+}
+
+/// The frame's measured camera (its swings move the image track's hint).
+fn view_of(header: &FrameHeader) -> Option<CameraView> {
+    let [fx, fy, cx, cy] = header.intrinsics;
+    CameraView::new(
+        &header.pose,
+        Intrinsics::new(fx, fy, cx, cy),
+        Distortion(header.distortion),
+    )
 }
 
 /// The gate of this frame from the estimate [`detection::prediction_gate::ESTIMATE_LAG_PAIRS`]

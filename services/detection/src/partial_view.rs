@@ -99,6 +99,14 @@ impl PartialViewGuard {
         })
     }
 
+    /// The camera turned since the target was last seen: the track's pixel is now
+    /// `centre` (when it was last seen stays).
+    pub fn moved_to(&mut self, centre: [f64; 2]) {
+        if let Some((c, _)) = self.last_seen.as_mut() {
+            *c = centre;
+        }
+    }
+
     /// Whether `detection` at `t_s` looks like the whole target (keep it) or like a part
     /// of it (drop it). Non-finite boxes are dropped.
     pub fn accept(&mut self, t_s: f64, detection: &Detection) -> bool {

@@ -2,9 +2,11 @@
 //! is detected (the detection service, the evaluation's vision pass and scene suite).
 //! Per camera, [`PartialViewGuard`] gives the detector its hint and drops a partly
 //! hidden target, and the geolocation filter's prediction (when the caller has one)
-//! gates which blob can be the target (`prediction_gate.rs`); what was dropped,
-//! gated out or retried is counted.
+//! gates which blob can be the target (`prediction_gate.rs`); a measured camera swing
+//! moves the hint and its landmarks with it (`camera_swing.rs`); what was dropped,
+//! gated out, retried or moved is counted.
 
+use crate::camera_swing::{swung, CameraView, SWING_SIGMAS};
 use crate::prediction_gate::{Gate, GateConfig};
 use crate::{
     ColourBlobConfig, ColourBlobDetector, DetectError, Detection, PartialViewGuard, TrackHint,
@@ -29,6 +31,9 @@ pub struct TrackCounts {
     /// Detections made after a camera found nothing inside its gate for
     /// `reacquire_after_s`, looking everywhere again.
     pub reacquired: u64,
+    /// Frames whose camera had swung beyond its attitude noise since the target was
+    /// last seen: the hint and its landmarks moved with the swing.
+    pub swings_followed: u64,
 }
 
 pub struct TrackedDetector {
@@ -42,6 +47,8 @@ pub struct TrackedDetector {
     /// Per camera: the other blobs of the target's colour in the frame where it was
     /// last seen (the hint's landmarks, `constellation.rs`), nearest first.
     landmarks: [Vec<[f64; 2]>; 2],
+    /// Per camera: that frame's measured view (`camera_swing.rs`).
+    hint_view: [Option<CameraView>; 2],
     /// Per camera: when a whole-frame look last saw a blob of the target's colour
     /// besides the target, and frames since the last whole-frame look.
     look_alike_seen: [Option<f64>; 2],
@@ -61,6 +68,7 @@ impl TrackedDetector {
             gate_config: config.gate,
             last_found: [None; 2],
             landmarks: std::array::from_fn(|_| Vec::with_capacity(crate::MAX_LANDMARKS + 8)),
+            hint_view: [None; 2],
             look_alike_seen: [None; 2],
             since_whole: [0; 2],
             look_alike_memory_s: config.look_alike_memory_s,
@@ -83,6 +91,7 @@ impl TrackedDetector {
         self.guards[camera] = self.fresh_guard;
         self.last_found[camera] = None;
         self.landmarks[camera].clear();
+        self.hint_view[camera] = None;
         self.look_alike_seen[camera] = None;
         self.since_whole[camera] = 0;
     }
@@ -95,23 +104,49 @@ impl TrackedDetector {
         t_s: f64,
         frame: &cv::Mat,
     ) -> Result<Option<Detection>, DetectError> {
-        self.detect_gated(camera, t_s, frame, None)
+        self.detect_gated(camera, t_s, frame, None, None)
     }
 
     /// [`Self::detect`] inside `gate` (the filter's prediction in this frame): a blob
     /// outside it is never the target. A camera that has found nothing inside its
     /// gates for `reacquire_after_s` looks everywhere again (counted `reacquired`).
+    /// `view` is this frame's measured camera: a swing since the target was last seen
+    /// moves the hint and its landmarks (`camera_swing.rs`, counted `swings_followed`).
     pub fn detect_gated(
         &mut self,
         camera: usize,
         t_s: f64,
         frame: &cv::Mat,
         gate: Option<Gate>,
+        view: Option<CameraView>,
     ) -> Result<Option<Detection>, DetectError> {
         let guard = self
             .guards
             .get_mut(camera)
             .ok_or_else(|| DetectError::Config(format!("camera {camera} is not 0 or 1")))?;
+        let sigma_attitude = self.gate_config.sigma_attitude_deg.to_radians();
+        let swing = |p: [f64; 2]| {
+            let (from, to) = (self.hint_view[camera].as_ref()?, view.as_ref()?);
+            swung(from, to, p, sigma_attitude, SWING_SIGMAS).map(|moved| (from, to, moved))
+        };
+        let mut own = guard.hint(t_s);
+        if let Some((from, to, moved)) = own.and_then(|h| swing(h.centre)) {
+            // The whole view turned: the landmarks with the hint (one that falls out of
+            // view is dropped), and the view they now belong to is this one.
+            self.landmarks[camera].retain_mut(|l| match from.transfer(to, *l) {
+                Some(m) => {
+                    *l = m;
+                    true
+                }
+                None => false,
+            });
+            if let Some(h) = own.as_mut() {
+                h.centre = moved;
+            }
+            guard.moved_to(moved);
+            self.hint_view[camera] = view;
+            self.counts.swings_followed += 1;
+        }
         let lost =
             self.last_found[camera].is_some_and(|t| t_s - t > self.gate_config.reacquire_after_s);
         let gate = gate.filter(|_| self.gate_config.enabled && !lost);
@@ -120,7 +155,6 @@ impl TrackedDetector {
         // lies inside the gate; otherwise the blob nearest the predicted pixel (inside
         // the gate) wins. A coasting filter's gate (both cameras' last detections
         // disagreed with it) distrusts the track: nearest the predicted pixel.
-        let own = guard.hint(t_s);
         let hint = match (own, gate) {
             (Some(h), Some(g)) if !g.contains(h.centre) || g.prefer_centre => Some(TrackHint {
                 centre: g.centre,
@@ -202,6 +236,7 @@ impl TrackedDetector {
             d(a).total_cmp(&d(b))
         });
         landmarks.truncate(crate::MAX_LANDMARKS);
+        self.hint_view[camera] = view;
         if guard.accept(t_s, &detection) {
             self.last_found[camera] = Some(t_s);
             if reacquiring {
@@ -296,12 +331,77 @@ mod tests {
                 radius_px: 100.0,
                 prefer_centre,
             };
-            d.detect_gated(0, 10.0 * dt, &street(&[(370, 200), (310, 200)]), Some(gate))
-                .unwrap()
-                .map(|f| f.centre[0])
+            d.detect_gated(
+                0,
+                10.0 * dt,
+                &street(&[(370, 200), (310, 200)]),
+                Some(gate),
+                None,
+            )
+            .unwrap()
+            .map(|f| f.centre[0])
         };
         assert_eq!(run(false), Some(370.0), "the track's pick inside the gate");
         assert_eq!(run(true), Some(310.0), "nearest the coasting prediction");
+    }
+
+    /// The camera pitches 16° between two frames (a route corner, `multi_town` seed 3):
+    /// every blob moves ~155 px up, and a look-alike that was below the target lands
+    /// next to the target's old pixel. Without the measured views the track takes it;
+    /// with them the hint moves with the swing and stays on the target.
+    #[test]
+    fn a_measured_swing_keeps_the_track_on_the_target() {
+        use shared_types::conventions::Intrinsics;
+        use shared_types::lens::Distortion;
+        use shared_types::messages::PoseSample;
+        let view = |pitch_deg: f64| {
+            let pose = PoseSample {
+                z_m: 100.0,
+                pitch_deg,
+                ..PoseSample::default()
+            };
+            CameraView::new(
+                &pose,
+                Intrinsics::from_hfov(640, 480, 60.0),
+                Distortion::default(),
+            )
+        };
+        let (before, after) = (view(0.0), view(-16.0));
+        let (target, look_alike) = ([320.0, 300.0], [330.0, 458.0]);
+        let moved = |p: [f64; 2]| {
+            let q = before.unwrap().transfer(&after.unwrap(), p).unwrap();
+            (q[0].round() as i32, q[1].round() as i32)
+        };
+        let (t2, l2) = (moved(target), moved(look_alike));
+        assert!((l2.1 - 300).abs() < 15 && t2.1 < 160, "{t2:?} {l2:?}");
+        let dt = 1.0 / 30.0;
+        let run = |with_views: bool| {
+            let mut d = TrackedDetector::new(ColourBlobConfig::default()).unwrap();
+            let cars = [(320, 300), (330, 458)];
+            for k in 0..10 {
+                // The first frame has the target alone (which car is the target).
+                let in_view = if k == 0 { &cars[..1] } else { &cars[..] };
+                let v = with_views.then_some(before).flatten();
+                let found = d
+                    .detect_gated(0, k as f64 * dt, &street(in_view), None, v)
+                    .unwrap()
+                    .unwrap();
+                assert_eq!(found.centre, [320.0, 300.0]);
+            }
+            let v = with_views.then_some(after).flatten();
+            let found = d
+                .detect_gated(0, 10.0 * dt, &street(&[t2, l2]), None, v)
+                .unwrap()
+                .map(|f| f.centre);
+            (found, d.take_counts().swings_followed)
+        };
+        let target_now = [t2.0 as f64, t2.1 as f64];
+        assert_eq!(run(true), (Some(target_now), 1));
+        assert_ne!(
+            run(false).0,
+            Some(target_now),
+            "the look-alike is taken without views"
+        );
     }
 
     #[test]

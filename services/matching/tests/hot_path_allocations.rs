@@ -18,6 +18,7 @@
 mod render;
 
 use acquisition::sim::{Presets, Simulator};
+use detection::camera_swing::CameraView;
 use detection::{ColourBlobConfig, ColourBlobDetector, TrackedDetector};
 use geolocation::set_message::estimate_message;
 use geolocation::{EstimatorConfig, TemporalEstimator};
@@ -110,8 +111,11 @@ fn the_per_frame_path_allocates_no_more_than_its_ceiling() {
         let mut found = [None, None];
         for uav in 0..2 {
             let image = inputs[uav].image;
-            let (d, a) =
-                count_allocations(|| detector.detect_gated(uav, headers[uav].t_s, image, None));
+            let f = &inputs[uav];
+            let view = CameraView::new(&f.pose, f.intrinsics, f.distortion);
+            let (d, a) = count_allocations(|| {
+                detector.detect_gated(uav, headers[uav].t_s, image, None, view)
+            });
             found[uav] = d.unwrap();
             if counted {
                 detection.add(a);

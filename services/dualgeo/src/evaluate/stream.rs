@@ -12,6 +12,7 @@
 use super::video_link::VideoLink;
 use acquisition::sim::{SimConfig, SimStep, Simulator};
 use anyhow::Result;
+use detection::camera_swing::CameraView;
 use detection::motion::{MotionConfig, MotionDetector};
 use detection::prediction_gate::{self, GateConfig, RecentPredictions, TargetPrediction};
 use detection::{ColourBlobConfig, TrackCounts, TrackedDetector};
@@ -204,7 +205,13 @@ impl SceneStream {
             });
             *d = match &mut self.detector {
                 SceneDetector::Colour(detector) => detector
-                    .detect_gated(i, f.t_s, &self.images[i], gate)?
+                    .detect_gated(
+                        i,
+                        f.t_s,
+                        &self.images[i],
+                        gate,
+                        CameraView::new(&f.measured, self.geometry.intrinsics, self.geometry.lens),
+                    )?
                     .map(|d| d.centre),
                 SceneDetector::Motion(detector, first_look) => {
                     // The operator's click, once (the pairs this stream sees, from 1).
@@ -239,6 +246,7 @@ impl SceneStream {
             let total = &mut self.detector_counts;
             total.gated_out += c.gated_out;
             total.reacquired += c.reacquired;
+            total.swings_followed += c.swings_followed;
             total.partial_view_dropped += c.partial_view_dropped;
         }
         let visible = [Uav::Left, Uav::Right]
