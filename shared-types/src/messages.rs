@@ -252,7 +252,7 @@ impl OtherTarget {
 /// `entries[1]` the current right one, then `count − 2` past images.
 #[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
 #[repr(C)]
-#[type_name("dualgeo::ObservationSetMsg/v6")]
+#[type_name("dualgeo::ObservationSetMsg/v7")]
 pub struct ObservationSetMsg {
     /// Index of this set among the sets matching published (gaps = sets lost).
     pub set_seq: u64,
@@ -265,7 +265,10 @@ pub struct ObservationSetMsg {
     pub rejected_past: u32,
     /// The stream segment of the pair ([`FrameHeader::segment`]).
     pub segment: u32,
-    pub _reserved: u32,
+    /// 1: the two current detections are two vehicles and could not be mended
+    /// (matching's pair check): the set holds the current images only, and no
+    /// estimate may take its rays (the filter publishes its prediction); 0 otherwise.
+    pub refused: u32,
     pub entries: [ObservationEntry; MAX_OBSERVATIONS],
     /// Valid entries of `others`.
     pub other_count: u32,
@@ -286,7 +289,7 @@ impl Default for ObservationSetMsg {
             count: 0,
             rejected_past: 0,
             segment: 0,
-            _reserved: 0,
+            refused: 0,
             entries: [ObservationEntry::default(); MAX_OBSERVATIONS],
             other_count: 0,
             others_dropped: 0,

@@ -52,16 +52,28 @@ pub fn estimate_set(
         }),
         Some(filter) => {
             let start = window.as_ref().ok().map(|f| &f.estimate);
-            filter
-                .update(t_s, current, past, start)
-                .map(|t| SetEstimate {
-                    estimate: t.estimate,
-                    velocity: Some(t.velocity),
-                    velocity_std_mps: Some(t.velocity_std_mps),
-                    reopened: t.reopened,
-                    rays_rejected: t.rays_rejected,
-                    quality: t.quality,
-                })
+            filter.update(t_s, current, past, start).map(of_filter)
         }
+    }
+}
+
+/// The temporal filter's prediction at `t_s`, taking none of the set's rays (its
+/// detections are another vehicle's: `target_identity.rs`); `None` before the start.
+pub fn coast_set(
+    t_s: f64,
+    current: [&Observation; 2],
+    temporal: &mut TemporalEstimator,
+) -> Option<Result<SetEstimate, EstimatorError>> {
+    temporal.coast(t_s, current).map(|r| r.map(of_filter))
+}
+
+fn of_filter(t: crate::temporal::TemporalEstimate) -> SetEstimate {
+    SetEstimate {
+        estimate: t.estimate,
+        velocity: Some(t.velocity),
+        velocity_std_mps: Some(t.velocity_std_mps),
+        reopened: t.reopened,
+        rays_rejected: t.rays_rejected,
+        quality: t.quality,
     }
 }

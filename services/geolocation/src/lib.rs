@@ -36,12 +36,13 @@ pub mod shared_bias;
 pub mod start_agreement;
 pub mod start_prior;
 pub mod synthetic;
+pub mod target_identity;
 pub mod temporal;
 pub mod temporal_snapshot;
 pub mod tracks;
 
 pub use config::{EstimatorConfig, EstimatorMethod, NoiseModel};
-pub use configured::{estimate_set, SetEstimate};
+pub use configured::{coast_set, estimate_set, SetEstimate};
 pub use consistency::{
     consistency_filter, geolocate_configured, geolocate_filtered, geolocate_filtered_paper,
     ConsistencyOutcome, FilteredEstimate,

@@ -27,10 +27,11 @@
 
 use anyhow::{Context, Result};
 use clap::Parser;
-use geolocation::others_message::add_tracks;
+use geolocation::others_message::{add_tracks, detection_identity};
 use geolocation::set_message::{
-    estimate_message, is_stale, segment_step, Resume, SegmentStep, CHECKPOINT_KIND,
+    coast_message, estimate_message, is_stale, segment_step, Resume, SegmentStep, CHECKPOINT_KIND,
 };
+use geolocation::target_identity::IdentityCheck;
 use geolocation::tracks::{TrackConfig, Tracks};
 use geolocation::{EstimatorConfig, EstimatorMethod, TemporalEstimator};
 use shared_types::checkpoint;
@@ -138,6 +139,8 @@ fn run() -> Result<()> {
         track_config,
         &mut stats,
     );
+    // Not checkpointed: after a restart the evidence builds up again in a few pairs.
+    let mut identity = IdentityCheck::default();
     let mut saver = StatsSaver::new(&args.service);
     let mut trace = args.service.tracer("geolocation");
     tracing::info!(run = endpoint.run_id(), method = ?config.method, incarnation = args.service.incarnation, "geolocation ready");
@@ -168,11 +171,39 @@ fn run() -> Result<()> {
                     t.reset();
                 }
                 tracks.start_over();
+                identity.clear();
                 stats.count("segments", 1);
             }
-            let mut msg = estimate_message(set, &config, temporal.as_mut(), &mut stats);
+            // The other vehicles say whether the target's detections are one of them
+            // (`geolocation::target_identity`): then the filter coasts.
+            let check = track_config.enabled && track_config.identity_check;
+            let elsewhere = match (&temporal, check && set.refused == 0) {
+                (Some(filter), true) => {
+                    detection_identity(set, filter, &tracks, &mut identity, &config)
+                }
+                _ => None,
+            };
+            // A refused set (matching's pair check: two vehicles) and one whose
+            // detections are another tracked vehicle's give the filter's prediction.
+            let coast = set.refused != 0 || elsewhere.is_some();
+            if set.refused != 0 {
+                stats.count("sets_refused", 1);
+            }
+            if let Some(id) = elsewhere {
+                stats.count("target_on_track", 1);
+                tracing::debug!(
+                    pair = set.pair_seq,
+                    track = id,
+                    "the target's detections are another vehicle's: coasting"
+                );
+            }
+            let mut msg = if coast {
+                coast_message(set, &config, temporal.as_mut(), &mut stats)
+            } else {
+                estimate_message(set, &config, temporal.as_mut(), &mut stats)
+            };
             if track_config.enabled {
-                add_tracks(set, &mut msg, &mut tracks, &config, &mut stats);
+                add_tracks(set, &mut msg, &mut tracks, &config, &mut stats, !coast);
             }
             drop(sample);
             let done = monotonic_ns();

@@ -5,13 +5,19 @@
 //! in [`crate::set_message`]: a bad pixel drops that vehicle (counted), never a panic,
 //! never a NaN out.
 //!
+//! Before the target's estimate, [`detection_identity`] asks the other vehicles whether
+//! the target's detections are another tracked vehicle (`target_identity.rs`).
+//!
 //! Counters: `others_located`, `others_rejected.<kind>`, `others_no_biases` (a pair
 //! with other vehicles but no valid target estimate to take the biases from),
+//! `others_skipped` (vehicles of a pair whose target detections were another's),
 //! `tracks_confirmed`, `tracks_deleted`, `tracks_tentative_dropped`,
 //! `tracks_reacquired`, `tracks_reidentified`, `tracks_target_fixes`.
 
 use crate::shared_bias::{locate_with_biases, OtherFix, SharedBiases};
+use crate::target_identity::{log_likelihood_ratios, IdentityCheck};
 use crate::tracks::{TrackQuality, Tracks};
+use crate::TemporalEstimator;
 use crate::{EstimatorConfig, Observation};
 use nalgebra::{Matrix2, Vector2};
 use shared_types::messages::{
@@ -132,20 +138,67 @@ fn locate_relative(
     })
 }
 
+/// Each other vehicle of `set` relative to the target's detection, (x, y) m, both
+/// located with `biases` through the same images (`target_identity.rs`); one that
+/// cannot be located is left out.
+pub fn relative_offsets(
+    set: &ObservationSetMsg,
+    biases: &SharedBiases,
+    config: &EstimatorConfig,
+) -> Vec<[f64; 2]> {
+    set.others()
+        .iter()
+        .filter_map(|other| {
+            let (theirs, target) = observations_of(set, other)?;
+            let a = locate_with_biases(&theirs, biases, config).ok()?;
+            let b = locate_with_biases(&target, biases, config).ok()?;
+            let d = a.position - b.position;
+            (d.x.is_finite() && d.y.is_finite()).then_some([d.x, d.y])
+        })
+        .collect()
+}
+
+/// Which vehicle the target's detections of `set` are, as the other vehicles of the
+/// pair place them against the tracks (`target_identity.rs`): `Some(id)` when they
+/// are track `id`'s. `None` before the filter has started.
+pub fn detection_identity(
+    set: &ObservationSetMsg,
+    temporal: &TemporalEstimator,
+    tracks: &Tracks,
+    check: &mut IdentityCheck,
+    config: &EstimatorConfig,
+) -> Option<u32> {
+    let prior = temporal.predict_target(set.t_s)?;
+    let biases = SharedBiases {
+        mean: prior.yaw_bias,
+        covariance: prior.yaw_bias_covariance,
+    };
+    let offsets = relative_offsets(set, &biases, config);
+    let predictions = tracks.predictions(set.t_s);
+    check.see(&log_likelihood_ratios(&prior, &predictions, &offsets))
+}
+
 /// Locates the other vehicles of `set`, updates `tracks` and writes the confirmed
-/// tracks into `msg` (the target's estimate of the same pair).
+/// tracks into `msg` (the target's estimate of the same pair). When the set's target
+/// detections are another vehicle's (`trusted` false: `detection_identity`), the
+/// others are not located (their positions relative to that vehicle would be put
+/// about the target's): the tracks coast (counted `others_skipped`).
 pub fn add_tracks(
     set: &ObservationSetMsg,
     msg: &mut EstimateMsg,
     tracks: &mut Tracks,
     config: &EstimatorConfig,
     stats: &mut StageStats,
+    trusted: bool,
 ) {
-    let biases = biases_of(msg);
+    let biases = if trusted { biases_of(msg) } else { None };
     let others = set.others();
+    if !trusted && !others.is_empty() {
+        stats.count("others_skipped", others.len() as u64);
+    }
     let mut fixes: Vec<OtherFix> = Vec::with_capacity(others.len());
     match biases {
-        None if !others.is_empty() => stats.count("others_no_biases", 1),
+        None if !others.is_empty() && trusted => stats.count("others_no_biases", 1),
         None => {}
         Some(b) => {
             for other in others {
@@ -304,7 +357,7 @@ mod tests {
             msg.covariance[15] = 0.01_f64.to_radians().powi(2);
             let mut set = set;
             set.t_s = msg.t_s;
-            add_tracks(&set, &mut msg, &mut tracks, &config, &mut stats);
+            add_tracks(&set, &mut msg, &mut tracks, &config, &mut stats, true);
             last = msg;
         }
         assert_eq!(stats.counter("others_located"), 4);
@@ -328,11 +381,11 @@ mod tests {
             status: EstimateStatus::Rejected as u32,
             ..Default::default()
         };
-        add_tracks(&set, &mut msg, &mut tracks, &config, &mut stats);
+        add_tracks(&set, &mut msg, &mut tracks, &config, &mut stats, true);
         assert_eq!(stats.counter("others_no_biases"), 1);
         let mut msg = EstimateMsg::default();
         set.others[0].current[1][0] = f64::NAN;
-        add_tracks(&set, &mut msg, &mut tracks, &config, &mut stats);
+        add_tracks(&set, &mut msg, &mut tracks, &config, &mut stats, true);
         assert_eq!(stats.counter("others_rejected.bad_input"), 1);
         assert_eq!(msg.track_count, 0);
     }

@@ -5,7 +5,10 @@
 //! non-finite estimate.
 
 use crate::TemporalSnapshot;
-use crate::{estimate_set, EstimatorConfig, Observation, PastImage, TemporalEstimator};
+use crate::{
+    coast_set, estimate_set, EstimatorConfig, EstimatorError, Observation, PastImage,
+    TemporalEstimator,
+};
 use serde::{Deserialize, Serialize};
 use shared_types::messages::{EstimateMsg, EstimateStatus, ObservationSetMsg};
 use shared_types::stats::StageStats;
@@ -73,7 +76,27 @@ pub fn estimate_message(
     temporal: Option<&mut TemporalEstimator>,
     stats: &mut StageStats,
 ) -> EstimateMsg {
-    let mut msg = estimate_unchecked(set, config, temporal, stats);
+    let msg = estimate_unchecked(set, config, temporal, stats, false);
+    checked(msg, config, stats)
+}
+
+/// [`estimate_message`] taking none of the set's rays: the temporal filter's
+/// prediction (`coasting`), for a set whose detections are another vehicle's
+/// (`target_identity.rs`) or two vehicles (a refused set). Without a started temporal
+/// filter, rejected (`rejected.not_started`).
+pub fn coast_message(
+    set: &ObservationSetMsg,
+    config: &EstimatorConfig,
+    temporal: Option<&mut TemporalEstimator>,
+    stats: &mut StageStats,
+) -> EstimateMsg {
+    let msg = estimate_unchecked(set, config, temporal, stats, true);
+    checked(msg, config, stats)
+}
+
+/// A valid estimate that is not finite is rejected, one less accurate than
+/// `max_h_acc_m` withheld (counted).
+fn checked(mut msg: EstimateMsg, config: &EstimatorConfig, stats: &mut StageStats) -> EstimateMsg {
     if msg.status == EstimateStatus::Ok as u32 && !finite(&msg) {
         stats.count("rejected.non_finite", 1);
         msg.status = EstimateStatus::Rejected as u32;
@@ -98,6 +121,7 @@ fn estimate_unchecked(
     config: &EstimatorConfig,
     temporal: Option<&mut TemporalEstimator>,
     stats: &mut StageStats,
+    coast: bool,
 ) -> EstimateMsg {
     let mut msg = EstimateMsg {
         pair_seq: set.pair_seq,
@@ -149,7 +173,16 @@ fn estimate_unchecked(
         })
         .collect();
     let current = [&observations[0], &observations[1]];
-    let result = estimate_set(set.t_s, current, &past, config, temporal).inspect(|e| {
+    let result = if coast {
+        temporal
+            .and_then(|filter| coast_set(set.t_s, current, filter))
+            .unwrap_or(Err(EstimatorError::NotStarted {
+                reason: "a set whose rays may not be taken, and no filter to predict",
+            }))
+    } else {
+        estimate_set(set.t_s, current, &past, config, temporal)
+    };
+    let result = result.inspect(|e| {
         if e.reopened {
             stats.count("temporal_reopened", 1);
             tracing::info!(
@@ -281,6 +314,55 @@ mod tests {
         let msg = estimate_message(&set_at(10.0), &strict, Some(&mut temporal), &mut stats);
         assert_eq!(msg.status, EstimateStatus::Withheld as u32);
         assert_eq!(stats.counter("withheld.h_acc"), 1);
+    }
+
+    /// A set whose rays may not be taken (refused, or another vehicle's) gives the
+    /// filter's prediction: before the start nothing; after it, the position the
+    /// filter predicts (its own `predict_target`), the rays untouched, and the next
+    /// set is estimated as if the coasted one had not been there but for the time.
+    #[test]
+    fn a_coasted_set_gives_the_prediction_and_takes_no_ray() {
+        let config = EstimatorConfig::default();
+        let mut temporal = TemporalEstimator::new(config).unwrap();
+        let mut stats = StageStats::new("t");
+        let before = coast_message(&set_at(9.7), &config, Some(&mut temporal), &mut stats);
+        assert_eq!(before.status, EstimateStatus::Rejected as u32);
+        assert_eq!(stats.counter("rejected.not_started"), 1);
+        start(&mut temporal, &config, &mut stats);
+        for k in 0..20 {
+            estimate_message(
+                &set_at(10.0 + 0.1 * k as f64),
+                &config,
+                Some(&mut temporal),
+                &mut stats,
+            );
+        }
+        let t = 12.05;
+        let predicted = temporal.predict_target(t).expect("started");
+        let mut far = set_at(t);
+        // Both detections 40 px off: taken, they would move the estimate.
+        for e in &mut far.entries[..2] {
+            e.pixel[0] += 40.0;
+        }
+        let mut coasting = temporal.clone();
+        let coasted = coast_message(&far, &config, Some(&mut coasting), &mut stats);
+        assert_eq!(coasted.status, EstimateStatus::Ok as u32);
+        assert_eq!(coasted.images_used, 0);
+        for (a, b) in coasted.position[..2].iter().zip(predicted.position) {
+            assert!(
+                (a - b).abs() < 1e-6,
+                "{:?} {:?}",
+                coasted.position,
+                predicted.position
+            );
+        }
+        let taken = estimate_message(&far, &config, Some(&mut temporal), &mut stats);
+        let moved = (taken.position[0] - coasted.position[0])
+            .hypot(taken.position[1] - coasted.position[1]);
+        assert!(
+            taken.images_used > 0 && moved > 0.1,
+            "taken: moved {moved} m"
+        );
     }
 
     /// A set of a later segment starts the filter over: the next set is not

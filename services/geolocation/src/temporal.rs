@@ -262,6 +262,20 @@ pub struct TemporalEstimator {
     pub(crate) start_candidates: Vec<StartCandidate>,
 }
 
+/// The filter's prediction of the target and its biases at one time
+/// ([`TemporalEstimator::predict_target`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TargetPrior {
+    /// (x, y), world ENU, m.
+    pub position: [f64; 2],
+    /// Its covariance, m².
+    pub covariance_xy: nalgebra::Matrix2<f64>,
+    /// (δψ_L, δψ_R), radians.
+    pub yaw_bias: [f64; 2],
+    /// Their covariance, rad².
+    pub yaw_bias_covariance: nalgebra::Matrix2<f64>,
+}
+
 /// Core states: x, y, z, v_x, v_y, δψ_L, δψ_R ...
 pub(crate) const CORE: usize = 7;
 /// ... then, when either UAV's noise model has a correlated error, each UAV's
@@ -551,6 +565,68 @@ impl TemporalEstimator {
         past: &[PastImage],
         window: Option<&Estimate>,
     ) -> Result<TemporalEstimate, EstimatorError> {
+        self.update_or_coast(t_s, current, past, window, false)
+    }
+
+    /// The prediction at `t_s` without taking any of the set's rays: its detections
+    /// are of another vehicle (`target_identity.rs`). The keyframes stay as they are;
+    /// the estimate is `coasting` once the biases are known. `None` before the start.
+    pub fn coast(
+        &mut self,
+        t_s: f64,
+        current: [&Observation; 2],
+    ) -> Option<Result<TemporalEstimate, EstimatorError>> {
+        (!self.bank.is_empty()).then(|| self.update_or_coast(t_s, current, &[], None, true))
+    }
+
+    /// The leading hypothesis's prediction at `t_s` (constant velocity, as an update
+    /// predicts), or `None` before the start or for a time before its state.
+    pub fn predict_target(&self, t_s: f64) -> Option<TargetPrior> {
+        let leader = self
+            .bank
+            .iter()
+            .max_by(|a, b| a.log_weight.total_cmp(&b.log_weight))?;
+        let (t0, s, p) = &leader.state;
+        let dt = t_s - t0;
+        if !(dt >= 0.0 && dt.is_finite()) {
+            return None;
+        }
+        let qa = self.config.temporal.acceleration_sigma_mps2.powi(2);
+        let cov = |r: usize, c: usize| {
+            let mut v =
+                p[(r, c)] + dt * (p[(r, c + 3)] + p[(r + 3, c)]) + dt * dt * p[(r + 3, c + 3)];
+            if r == c {
+                v += qa * dt.powi(3) / 3.0;
+            }
+            v
+        };
+        let out = TargetPrior {
+            position: [s[0] + s[3] * dt, s[1] + s[4] * dt],
+            covariance_xy: nalgebra::Matrix2::new(cov(0, 0), cov(0, 1), cov(1, 0), cov(1, 1)),
+            yaw_bias: [s[5], s[6]],
+            yaw_bias_covariance: nalgebra::Matrix2::new(p[(5, 5)], p[(5, 6)], p[(6, 5)], p[(6, 6)]),
+        };
+        let finite = out
+            .position
+            .iter()
+            .chain(&out.yaw_bias)
+            .all(|v| v.is_finite())
+            && out
+                .covariance_xy
+                .iter()
+                .chain(out.yaw_bias_covariance.iter())
+                .all(|v| v.is_finite());
+        finite.then_some(out)
+    }
+
+    fn update_or_coast(
+        &mut self,
+        t_s: f64,
+        current: [&Observation; 2],
+        past: &[PastImage],
+        window: Option<&Estimate>,
+        coast: bool,
+    ) -> Result<TemporalEstimate, EstimatorError> {
         if !t_s.is_finite() {
             return Err(EstimatorError::NonFinite {
                 index: 0,
@@ -601,7 +677,7 @@ impl TemporalEstimator {
         let mut outs = Vec::with_capacity(self.bank.len());
         let mut failure = None;
         for mut h in std::mem::take(&mut self.bank) {
-            match self.update_one(&mut h, t_s, current, past, starting) {
+            match self.update_one(&mut h, t_s, current, past, starting, coast) {
                 Ok((out, log_likelihood, current_taken)) => {
                     h.log_weight += log_likelihood * self.config.temporal.likelihood_temper;
                     outs.push((out, current_taken));
@@ -776,6 +852,7 @@ impl TemporalEstimator {
         current: [&Observation; 2],
         past: &[PastImage],
         starting: bool,
+        coast: bool,
     ) -> Result<(TemporalEstimate, f64, bool), EstimatorError> {
         let tc = self.config.temporal;
         let (t0, mut s, mut p) = hypothesis.state.clone();
@@ -847,7 +924,12 @@ impl TemporalEstimator {
         }
 
         // Keyframe slots: marginalise those that left the window, add the new ones.
-        let ids: Vec<ImageId> = past.iter().map(|image| image.id).collect();
+        // Coasting keeps every keyframe (its `past` is empty).
+        let ids: Vec<ImageId> = if coast {
+            hypothesis.slots.clone()
+        } else {
+            past.iter().map(|image| image.id).collect()
+        };
         let core = self.core_len();
         let keep: Vec<usize> = (0..core)
             .chain(
@@ -922,7 +1004,8 @@ impl TemporalEstimator {
         // ~1.4 m low with horizontal GPS noise alone (docs/temporal.md).
         let kept = s.len();
         let mut rays: Vec<Ray> = Vec::with_capacity(2 + past.len());
-        for o in current {
+        let current: &[&Observation] = if coast { &[] } else { &current };
+        for &o in current {
             let sig = self.pose_sigmas(o.uav);
             let n = s.len();
             s = s.resize_vertically(n + 6, 0.0);

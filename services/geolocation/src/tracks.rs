@@ -64,6 +64,10 @@ pub struct TrackConfig {
     /// A deleted track is remembered this long, s (0: never): a new track of its
     /// colour where it could have driven takes its id back (re-identification).
     pub reid_after_s: f64,
+    /// Ask the other vehicles of each pair whether the target's detections are a
+    /// tracked vehicle's, and coast the target's filter when they are
+    /// (`target_identity.rs`).
+    pub identity_check: bool,
 }
 
 impl Default for TrackConfig {
@@ -81,6 +85,7 @@ impl Default for TrackConfig {
             max_tracks: 8,
             min_speed_mps: 1.0,
             reid_after_s: 10.0,
+            identity_check: true,
         }
     }
 }
@@ -140,6 +145,16 @@ pub struct TrackReport {
     /// (east, north), m/s.
     pub velocity_mps: [f64; 2],
     pub quality: TrackQuality,
+}
+
+/// A confirmed track predicted to a pair's time ([`Tracks::predictions`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TrackPrediction {
+    pub id: u32,
+    /// (x, y), world ENU, m.
+    pub position: [f64; 2],
+    /// Its covariance, with the persistent part of its fixes' error, m².
+    pub covariance_xy: Matrix2<f64>,
 }
 
 /// What the tracks did since the last [`Tracks::take_counts`].
@@ -390,6 +405,28 @@ impl Tracks {
         tracks.next_id = snap.next_id;
         tracks.noise_scale = snap.noise_scale;
         Ok(tracks)
+    }
+
+    /// The confirmed tracks predicted to `t_s` (nothing changes): (id, (x, y), its
+    /// covariance, colour when known).
+    pub fn predictions(&self, t_s: f64) -> Vec<TrackPrediction> {
+        self.tracks
+            .iter()
+            .filter(|t| t.id != 0)
+            .map(|t| {
+                let mut t = t.clone();
+                predict(&mut t, t_s, self.config.accel_sigma_mps2);
+                TrackPrediction {
+                    id: t.id,
+                    position: [t.x[0], t.x[1]],
+                    covariance_xy: t.p.fixed_view::<2, 2>(0, 0).into_owned() + t.persistent_xy,
+                }
+            })
+            .filter(|t| {
+                t.position.iter().all(|v| v.is_finite())
+                    && t.covariance_xy.iter().all(|v| v.is_finite())
+            })
+            .collect()
     }
 
     /// One pair at `t_s`: the other vehicles' `fixes` and the target's own estimate

@@ -408,8 +408,34 @@ impl Intake {
                 self.stats.count("warming_up", 1);
                 None
             }
-            // Counted `target_pair_mismatch` with the chain's counts above.
-            MatchOutcome::TargetPairMismatch => None,
+            // Counted `target_pair_mismatch` with the chain's counts above. The set
+            // holds the current images only and is marked refused: geolocation
+            // publishes the filter's prediction for it, which keeps the detectors'
+            // gates (a coasting one takes the blob nearest the prediction) until both
+            // cameras are on one vehicle again. Without it a camera that had taken
+            // another car kept it, and every later pair was refused (`multi_town`
+            // seed 3: 163 pairs, 7 s).
+            MatchOutcome::TargetPairMismatch(current) => {
+                let mut msg = ObservationSetMsg {
+                    pair_seq: seq,
+                    capture_ns: hl.capture_ns.min(hr.capture_ns),
+                    t_s: hl.t_s,
+                    rejected_past: rejections.len() as u32,
+                    segment: hl.segment,
+                    refused: 1,
+                    ..Default::default()
+                };
+                let frames = [(hl.seq, hl.t_s), (hr.seq, hr.t_s)];
+                for (slot, (o, (seq, t_s))) in
+                    msg.entries.iter_mut().zip(current.iter().zip(frames))
+                {
+                    *slot = o.to_entry();
+                    slot.frame_seq = seq;
+                    slot.t_s = t_s;
+                    msg.count += 1;
+                }
+                Some(msg)
+            }
             MatchOutcome::Matched(m) => {
                 let fallbacks = m
                     .past

@@ -58,8 +58,9 @@ pub enum MatchOutcome {
     },
     Matched(Box<MatchedSet>),
     /// The two current detections are two vehicles and could not be mended
-    /// (`chain::target_pair`): no set.
-    TargetPairMismatch,
+    /// (`chain::target_pair`): no set to estimate from; the current observations, so
+    /// that the service can say so downstream (a refused set: the filter coasts).
+    TargetPairMismatch(Box<[Observation; 2]>),
 }
 
 /// The consistency filter and the iteration on a matched set (filtered), and the
@@ -352,7 +353,7 @@ impl VisionChain {
         let outcome = match matched {
             MatchOutcome::NoDetection => ChainOutcome::NoDetection,
             MatchOutcome::NotEnoughHistory { past } => ChainOutcome::NotEnoughHistory { past },
-            MatchOutcome::TargetPairMismatch => ChainOutcome::TargetPairMismatch,
+            MatchOutcome::TargetPairMismatch(_) => ChainOutcome::TargetPairMismatch,
             MatchOutcome::Matched(set) => {
                 let t = Instant::now();
                 let located = estimate_matched(&set, &self.estimator);
@@ -630,7 +631,7 @@ impl VisionChain {
                 }
                 target_pair::PairCheck::Mismatch => {
                     self.counts.target_pair_mismatch += 1;
-                    return Ok(MatchOutcome::TargetPairMismatch);
+                    return Ok(MatchOutcome::TargetPairMismatch(Box::new(set.current)));
                 }
             }
         }
