@@ -17,8 +17,8 @@ use detection::motion::{MotionConfig, MotionDetector};
 use detection::prediction_gate::{self, GateConfig, RecentPredictions, TargetPrediction};
 use detection::{ColourBlobConfig, TrackCounts, TrackedDetector};
 use geolocation::{
-    estimate_set, geolocate_filtered_paper, EstimatorConfig, EstimatorError, EstimatorMethod,
-    FilteredEstimate, PastImage, SetEstimate, TemporalEstimator,
+    coast_set, estimate_set, geolocate_filtered_paper, EstimatorConfig, EstimatorError,
+    EstimatorMethod, FilteredEstimate, PastImage, SetEstimate, TemporalEstimator,
 };
 use matching::epipolar::MatchReject;
 use matching::{ChainCounts, FrameInput, MatchOutcome, MatchingConfig, VisionChain};
@@ -381,6 +381,16 @@ impl Lane {
                     &self.estimator,
                 ));
             }
+        }
+        // A pair refused as two vehicles gives the filter's prediction, as the
+        // geolocation service publishes it for a refused set: its coasting gate
+        // brings the detectors back to one vehicle.
+        if let MatchOutcome::TargetPairMismatch(current) = &outcome {
+            default = coast_set(
+                pair.step.frames[0].t_s,
+                [&current[0], &current[1]],
+                &mut self.temporal,
+            );
         }
         self.chain.admit([&metas[0], &metas[1]], &mut observed)?;
         Ok(LaneStep {
