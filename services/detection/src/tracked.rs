@@ -130,7 +130,10 @@ impl TrackedDetector {
             swung(from, to, p, sigma_attitude, SWING_SIGMAS).map(|moved| (from, to, moved))
         };
         let mut own = guard.hint(t_s);
-        if let Some((from, to, moved)) = own.and_then(|h| swing(h.centre)) {
+        // Within `reseed_after_s` of the last sighting: the rotation-only transfer
+        // leaves the UAV's own travel out, a metre or two over that time.
+        let fresh = own.filter(|h| h.fresh);
+        if let Some((from, to, moved)) = fresh.and_then(|h| swing(h.centre)) {
             // The whole view turned: the landmarks with the hint (one that falls out of
             // view is dropped), and the view they now belong to is this one.
             self.landmarks[camera].retain_mut(|l| match from.transfer(to, *l) {

@@ -18,7 +18,10 @@
 //! more than a frame period after the pair's moment; `shared_types::deadline`),
 //! `segments` (the stream jumped, a looped recording starting over: the filter and the
 //! tracks started over, as for a new stream; a set of an earlier segment is
-//! `stale_sets`).
+//! `stale_sets`), `sets_refused` (matching refused the pair as two vehicles: the
+//! filter's prediction is published, its rays untaken) and `target_on_track` (the
+//! other vehicles of the pair say the target's detections are another tracked
+//! vehicle's: the same; `geolocation::target_identity`).
 //!
 //! Several targets (`[tracks]`, on by default): the set's other vehicles are located
 //! with the target's yaw biases and tracked (`geolocation::others_message`, its

@@ -318,8 +318,8 @@ mod tests {
 
     /// A set whose rays may not be taken (refused, or another vehicle's) gives the
     /// filter's prediction: before the start nothing; after it, the position the
-    /// filter predicts (its own `predict_target`), the rays untouched, and the next
-    /// set is estimated as if the coasted one had not been there but for the time.
+    /// filter predicts (its own `predict_target`), not `tracking`, no image used;
+    /// the same set taken as usual moves the estimate.
     #[test]
     fn a_coasted_set_gives_the_prediction_and_takes_no_ray() {
         let config = EstimatorConfig::default();
@@ -348,6 +348,7 @@ mod tests {
         let coasted = coast_message(&far, &config, Some(&mut coasting), &mut stats);
         assert_eq!(coasted.status, EstimateStatus::Ok as u32);
         assert_eq!(coasted.images_used, 0);
+        assert_ne!(coasted.quality, crate::Quality::Tracking as u64);
         for (a, b) in coasted.position[..2].iter().zip(predicted.position) {
             assert!(
                 (a - b).abs() < 1e-6,

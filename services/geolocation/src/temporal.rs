@@ -579,19 +579,26 @@ impl TemporalEstimator {
         (!self.bank.is_empty()).then(|| self.update_or_coast(t_s, current, &[], None, true))
     }
 
-    /// The leading hypothesis's prediction at `t_s` (constant velocity, as an update
-    /// predicts), or `None` before the start or for a time before its state.
+    /// The leading hypothesis's prediction at `t_s` (constant velocity and the biases'
+    /// walk, as an update predicts; the leader's own covariance, not the mixture's
+    /// spread), or `None` before the start or for a time before its state.
     pub fn predict_target(&self, t_s: f64) -> Option<TargetPrior> {
+        // The leader as `mixture` picks it (the first of the heaviest).
         let leader = self
             .bank
             .iter()
-            .max_by(|a, b| a.log_weight.total_cmp(&b.log_weight))?;
+            .fold(None, |best: Option<&Hypothesis>, h| match best {
+                Some(b) if b.log_weight >= h.log_weight => Some(b),
+                _ => Some(h),
+            })?;
         let (t0, s, p) = &leader.state;
         let dt = t_s - t0;
         if !(dt >= 0.0 && dt.is_finite()) {
             return None;
         }
-        let qa = self.config.temporal.acceleration_sigma_mps2.powi(2);
+        let tc = self.config.temporal;
+        let qa = tc.acceleration_sigma_mps2.powi(2);
+        let qb = tc.bias_drift_deg_per_sqrt_s.to_radians().powi(2) * dt;
         let cov = |r: usize, c: usize| {
             let mut v =
                 p[(r, c)] + dt * (p[(r, c + 3)] + p[(r + 3, c)]) + dt * dt * p[(r + 3, c + 3)];
@@ -604,7 +611,8 @@ impl TemporalEstimator {
             position: [s[0] + s[3] * dt, s[1] + s[4] * dt],
             covariance_xy: nalgebra::Matrix2::new(cov(0, 0), cov(0, 1), cov(1, 0), cov(1, 1)),
             yaw_bias: [s[5], s[6]],
-            yaw_bias_covariance: nalgebra::Matrix2::new(p[(5, 5)], p[(5, 6)], p[(6, 5)], p[(6, 6)]),
+            yaw_bias_covariance: nalgebra::Matrix2::new(p[(5, 5)], p[(5, 6)], p[(6, 5)], p[(6, 6)])
+                + nalgebra::Matrix2::identity() * qb,
         };
         let finite = out
             .position
@@ -633,7 +641,8 @@ impl TemporalEstimator {
                 what: "time",
             });
         }
-        for (i, o) in current.iter().enumerate() {
+        // A coasted set's detections are not used (nor checked).
+        for (i, o) in current.iter().enumerate().filter(|_| !coast) {
             o.validate(i)?;
         }
         for (i, image) in past.iter().enumerate() {
@@ -1076,7 +1085,11 @@ impl TemporalEstimator {
                 accepted.push(i);
             }
         }
-        hypothesis.since_reopen += 1;
+        // A coasted set has no ray: it neither counts towards a re-opening's hold nor
+        // moves the drift monitor's decisions (no re-opening, no re-acquisition).
+        if !coast {
+            hypothesis.since_reopen += 1;
+        }
         let drift_var = DRIFT_ALPHA / (2.0 - DRIFT_ALPHA);
         let drift = hypothesis.drift.map(|m| m.norm_squared() / drift_var);
         // A bias step is one AHRS's: the two UAVs' yaw errors are independent, so both
@@ -1096,15 +1109,19 @@ impl TemporalEstimator {
         // are not taken until the running means come back (the filter coasts), or for
         // `LOST_AFTER_S`: then the target is elsewhere, and the position and velocity
         // are re-acquired from the rays with the biases kept (below).
-        let both_drifting = drift.iter().all(|d| *d > DRIFT_GATE);
-        if both_drifting {
+        let stepped = stepped.filter(|_| !coast);
+        let both_drifting = !coast && drift.iter().all(|d| *d > DRIFT_GATE);
+        if coast {
+            // No evidence either way: the drifting clock is left as it is.
+        } else if both_drifting {
             hypothesis.lost_since_s.get_or_insert(t_s);
         } else {
             hypothesis.lost_since_s = None;
         }
-        let lost = hypothesis
-            .lost_since_s
-            .is_some_and(|since| t_s - since >= LOST_AFTER_S);
+        let lost = !coast
+            && hypothesis
+                .lost_since_s
+                .is_some_and(|since| t_s - since >= LOST_AFTER_S);
         if both_drifting && !lost {
             accepted.clear();
         }

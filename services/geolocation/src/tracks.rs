@@ -407,8 +407,8 @@ impl Tracks {
         Ok(tracks)
     }
 
-    /// The confirmed tracks predicted to `t_s` (nothing changes): (id, (x, y), its
-    /// covariance, colour when known).
+    /// The confirmed tracks predicted to `t_s` (nothing changes): id, (x, y) and its
+    /// covariance.
     pub fn predictions(&self, t_s: f64) -> Vec<TrackPrediction> {
         self.tracks
             .iter()

@@ -14,7 +14,7 @@ use acquisition::resume::StreamPosition;
 use detection::frame_view::frame_mat;
 use detection::config::DetectionConfig;
 use detection::{ColourBlobConfig, TrackedDetector};
-use geolocation::set_message::{estimate_message, finite, is_stale, Resume, CHECKPOINT_KIND};
+use geolocation::set_message::{coast_message, estimate_message, finite, is_stale, Resume, CHECKPOINT_KIND};
 use geolocation::{EstimatorConfig, EstimatorMethod, TemporalEstimator};
 use matching::intake::Intake;
 use matching::ring_snapshot::{KeyframeSnapshot, RingIndex};
@@ -232,7 +232,12 @@ pub fn observations(data: &[u8]) {
         if is_stale(set.t_s, last_t) {
             continue;
         }
-        let msg = estimate_message(&set, &config, temporal.as_mut(), &mut stats);
+        // As the service: a refused set gives the filter's prediction.
+        let msg = if set.refused != 0 {
+            coast_message(&set, &config, temporal.as_mut(), &mut stats)
+        } else {
+            estimate_message(&set, &config, temporal.as_mut(), &mut stats)
+        };
         if msg.status == EstimateStatus::Ok as u32 {
             assert!(
                 finite(&msg),

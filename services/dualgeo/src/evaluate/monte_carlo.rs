@@ -39,13 +39,15 @@ pub const WARM_UP_S: f64 = 10.0;
 /// start's grid 7 × 7 instead of 3 × 3, `bias_hypotheses`; 14: the start without the
 /// paper's window estimate, `geolocation::start_agreement`; 15: the target's pair
 /// checked across the views and mended or dropped, `matching::chain::target_pair`,
-/// with the detector's candidates given to matching).
-const RUN_FORMAT: u32 = 15;
+/// with the detector's candidates given to matching; 16: a measured camera swing moves
+/// the detector's track, `detection::camera_swing`, and a refused pair gives the
+/// filter's prediction).
+const RUN_FORMAT: u32 = 16;
 /// The same for what changes only runs under correlated (Gauss–Markov) navigation
 /// errors: 9 = the temporal filter's tilt consider states and keyframe ageing, which
 /// exist only with a correlated-error block (white runs are bit-identical, checked on
-/// `default` seed 1); 10 to 15 with RUN_FORMAT.
-const CORRELATED_FORMAT: u32 = 15;
+/// `default` seed 1); 10 to 16 with RUN_FORMAT.
+const CORRELATED_FORMAT: u32 = 16;
 
 /// The navigation-error models the Monte Carlo runs under.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize, clap::ValueEnum)]

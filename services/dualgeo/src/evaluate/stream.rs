@@ -267,6 +267,9 @@ impl SceneStream {
 pub struct LaneStep {
     /// `None` when matching gave no set (no detection, not enough history).
     pub default: Option<Result<SetEstimate, EstimatorError>>,
+    /// `default` is the filter's prediction for a pair matching refused as two
+    /// vehicles (not timed, the paper's method not run).
+    pub coasted: bool,
     /// The paper's method on the same set, when the lane scores it.
     pub paper: Option<Result<FilteredEstimate, EstimatorError>>,
     /// Process CPU time of the chain and the default estimate, µs.
@@ -385,6 +388,7 @@ impl Lane {
         // A pair refused as two vehicles gives the filter's prediction, as the
         // geolocation service publishes it for a refused set: its coasting gate
         // brings the detectors back to one vehicle.
+        let coasted = matches!(outcome, MatchOutcome::TargetPairMismatch(_));
         if let MatchOutcome::TargetPairMismatch(current) = &outcome {
             default = coast_set(
                 pair.step.frames[0].t_s,
@@ -395,6 +399,7 @@ impl Lane {
         self.chain.admit([&metas[0], &metas[1]], &mut observed)?;
         Ok(LaneStep {
             default,
+            coasted,
             paper,
             cpu_us,
             counts: self.chain.take_counts(),

@@ -168,7 +168,11 @@ pub fn run_scene(
                 r.located_not_visible += located as usize;
             }
             if let Some(default) = lane.default {
-                r.cpu_us.push(lane.cpu_us);
+                // A refused pair's prediction is an estimate as `run` publishes it,
+                // but no set was estimated: not timed, nothing for the paper's method.
+                if !lane.coasted {
+                    r.cpu_us.push(lane.cpu_us);
+                }
                 if let Ok(e) = default {
                     r.default.push(
                         e.estimate.position,
@@ -183,6 +187,7 @@ pub fn run_scene(
                         target,
                         Some((f.estimate.yaw_bias, bias_truth)),
                     ),
+                    _ if lane.coasted => {}
                     _ => r.paper.rejected += 1,
                 }
             }
