@@ -14,67 +14,31 @@
 //!   vehicles and, with no estimate, no gate brought them back: 73 %. A refused pair
 //!   now gives the filter's prediction (`sets_refused`), whose gate does.
 
+#[path = "support/multi_target_eval.rs"]
+mod multi_target_eval;
 #[path = "support/scratch.rs"]
 mod scratch;
 
-use scratch::{json, Scratch};
-use std::path::Path;
-use std::process::Command;
+use multi_target_eval::fly;
+use scratch::Scratch;
 
 #[test]
 fn the_targets_estimate_stays_on_the_target_after_the_bridge() {
     let dir = Scratch::new("bridge-swap");
-    let out = dir.s("eval");
-    let flights = dir.s("flights");
-    let o = Command::new(env!("CARGO_BIN_EXE_dualgeo"))
-        .args([
-            "evaluate",
-            "--multi-target",
-            "--scenes",
-            "suite_traffic",
-            "--scene-seeds",
-            "5",
-            "--mc-duration-s",
-            "20",
-            "--out",
-            &out,
-            "--keep-flights",
-            &flights,
-        ])
-        .output()
-        .expect("spawn dualgeo");
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let flown = fly(&dir, "suite_traffic", 5, 20.0);
     // (seed, counter that shows the mechanism at work, located before it).
     for (seed, counter, before) in [
         (2, "geolocation.sets_refused", 0.73),
         (5, "geolocation.target_on_track", 0.49),
     ] {
         let name = format!("suite_traffic-{seed:03}");
-        let run = json(
-            &Path::new(&out)
-                .join("multi-target-seeds")
-                .join("runs")
-                .join(format!("{name}.json")),
-        );
-        // (id, located share, MAE, inside h_acc, inside v_acc) per vehicle; 0 the target.
-        let target = run["per_vehicle"]
-            .as_array()
-            .expect("per_vehicle")
-            .iter()
-            .find(|v| v[0] == 0)
-            .expect("the target scored");
-        let located = target[1].as_f64().expect("located share");
+        let located = flown.target_located(&name);
         // 0.99 and 0.96 now.
         assert!(
             located >= 0.9,
             "seed {seed}: target located in {located} of its pairs ({before} before)"
         );
-        let counters = json(
-            &Path::new(&flights)
-                .join(&name)
-                .join("run")
-                .join("counters.json"),
-        );
+        let counters = flown.counters(&name);
         let n = counters[counter].as_u64().unwrap_or(0);
         assert!(n > 0, "seed {seed}: no {counter}: {counters}");
     }

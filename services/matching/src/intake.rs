@@ -399,6 +399,16 @@ impl Intake {
                 self.stats.count(name, n);
             }
         }
+        // A set's header (`refused`: 1 for a pair refused as two vehicles).
+        let header = |refused: u32| ObservationSetMsg {
+            pair_seq: seq,
+            capture_ns: hl.capture_ns.min(hr.capture_ns),
+            t_s: hl.t_s,
+            rejected_past: rejections.len() as u32,
+            segment: hl.segment,
+            refused,
+            ..Default::default()
+        };
         let set = match outcome {
             MatchOutcome::NoDetection => {
                 self.stats.count("no_detection", 1);
@@ -416,24 +426,9 @@ impl Intake {
             // another car kept it, and every later pair was refused (`multi_town`
             // seed 3: 163 pairs, 7 s).
             MatchOutcome::TargetPairMismatch(current) => {
-                let mut msg = ObservationSetMsg {
-                    pair_seq: seq,
-                    capture_ns: hl.capture_ns.min(hr.capture_ns),
-                    t_s: hl.t_s,
-                    rejected_past: rejections.len() as u32,
-                    segment: hl.segment,
-                    refused: 1,
-                    ..Default::default()
-                };
+                let mut msg = header(1);
                 let frames = [(hl.seq, hl.t_s), (hr.seq, hr.t_s)];
-                for (slot, (o, (seq, t_s))) in
-                    msg.entries.iter_mut().zip(current.iter().zip(frames))
-                {
-                    *slot = o.to_entry();
-                    slot.frame_seq = seq;
-                    slot.t_s = t_s;
-                    msg.count += 1;
-                }
+                fill_entries(&mut msg, current.iter().zip(frames));
                 Some(msg)
             }
             MatchOutcome::Matched(m) => {
@@ -448,27 +443,15 @@ impl Intake {
                 if fallbacks > 0 {
                     self.stats.count("essential_fallback", fallbacks as u64);
                 }
-                let mut msg = ObservationSetMsg {
-                    pair_seq: seq,
-                    capture_ns: hl.capture_ns.min(hr.capture_ns),
-                    t_s: hl.t_s,
-                    rejected_past: rejections.len() as u32,
-                    segment: hl.segment,
-                    ..Default::default()
-                };
+                let mut msg = header(0);
                 self.put_others([&ml, &mr], &m, &mut msg);
                 let frames = [(hl.seq, hl.t_s), (hr.seq, hr.t_s)]
                     .into_iter()
                     .chain(m.past.iter().map(|p| (p.seq, p.t_s)));
-                let all = m.current.iter().chain(&m.past_observations).zip(frames);
-                for (slot, (o, (seq, t_s))) in
-                    msg.entries.iter_mut().zip(all).take(MAX_OBSERVATIONS)
-                {
-                    *slot = o.to_entry();
-                    slot.frame_seq = seq;
-                    slot.t_s = t_s;
-                    msg.count += 1;
-                }
+                fill_entries(
+                    &mut msg,
+                    m.current.iter().chain(&m.past_observations).zip(frames),
+                );
                 Some(msg)
             }
         };
@@ -556,6 +539,25 @@ impl Intake {
                 tracing::warn!("keyframes not checkpointed: {e}");
             }
         }
+    }
+}
+
+/// `observations`, each with its frame's (seq, capture time), into `msg`'s entries:
+/// as many as fit, counted.
+fn fill_entries<'a>(
+    msg: &mut ObservationSetMsg,
+    observations: impl Iterator<Item = (&'a geolocation::Observation, (u64, f64))>,
+) {
+    for (slot, (o, (seq, t_s))) in msg
+        .entries
+        .iter_mut()
+        .zip(observations)
+        .take(MAX_OBSERVATIONS)
+    {
+        *slot = o.to_entry();
+        slot.frame_seq = seq;
+        slot.t_s = t_s;
+        msg.count += 1;
     }
 }
 
