@@ -134,8 +134,8 @@ impl TrackedDetector {
         // leaves the UAV's own travel out, a metre or two over that time.
         let fresh = own.filter(|h| h.fresh);
         if let Some((from, to, moved)) = fresh.and_then(|h| swing(h.centre)) {
-            // The whole view turned: the landmarks with the hint (one that falls out of
-            // view is dropped), and the view they now belong to is this one.
+            // The whole view turned: the landmarks with the hint (one the rotation puts
+            // behind the camera is dropped), and the view they now belong to is this one.
             self.landmarks[camera].retain_mut(|l| match from.transfer(to, *l) {
                 Some(m) => {
                     *l = m;
