@@ -216,7 +216,8 @@ pub fn add_tracks(
     let biases = if trusted { biases_of(msg) } else { None };
     let mut fixes: Vec<OtherFix> = Vec::with_capacity(others.len());
     match biases {
-        None if !others.is_empty() => stats.count("others_no_biases", 1),
+        // A skipped pair's vehicles are counted `others_skipped` above, not here.
+        None if trusted && !others.is_empty() => stats.count("others_no_biases", 1),
         None => {}
         Some(b) => {
             for other in others {
