@@ -10,6 +10,10 @@
 //!   relative to the detection, now say it is the look-alike's track
 //!   (`geolocation::target_identity`, counted `target_on_track`): the filter coasts
 //!   until the detectors are back on the target.
+//! - Seed 4: the same, with one other vehicle in view, whose track had widened while
+//!   nothing was seen: the evidence built slower than the filter walked onto the
+//!   look-alike (62 %). Right after such a gap a pair in doubt is coasted too
+//!   (`target_in_doubt`).
 //! - Seed 2: the two cameras took different cars; every pair was refused as two
 //!   vehicles and, with no estimate, no gate brought them back: 73 %. A refused pair
 //!   now gives the filter's prediction (`sets_refused`), whose gate does.
@@ -29,11 +33,11 @@ fn the_targets_estimate_stays_on_the_target_after_the_bridge() {
     // (seed, counter that shows the mechanism at work, located before it).
     for (seed, counter, before) in [
         (2, "geolocation.sets_refused", 0.73),
+        (4, "geolocation.target_in_doubt", 0.62),
         (5, "geolocation.target_on_track", 0.49),
     ] {
         let name = format!("suite_traffic-{seed:03}");
         let located = flown.target_located(&name);
-        // 0.99 and 0.96 now.
         assert!(
             located >= 0.9,
             "seed {seed}: target located in {located} of its pairs ({before} before)"

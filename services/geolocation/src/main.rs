@@ -21,7 +21,8 @@
 //! `stale_sets`), `sets_refused` (matching refused the pair as two vehicles: the
 //! filter's prediction is published, its rays untaken) and `target_on_track` (the
 //! other vehicles of the pair say the target's detections are another tracked
-//! vehicle's: the same; `geolocation::target_identity`).
+//! vehicle's: the same; `geolocation::target_identity`), `target_in_doubt` (right
+//! after a gap in the sets, they put it in doubt: the same).
 //!
 //! Several targets (`[tracks]`, on by default): the set's other vehicles are located
 //! with the target's yaw biases and tracked (`geolocation::others_message`, its
@@ -174,7 +175,7 @@ fn run() -> Result<()> {
                     t.reset();
                 }
                 tracks.start_over();
-                identity.clear();
+                identity = IdentityCheck::default();
                 stats.count("segments", 1);
             }
             // The other vehicles say whether the target's detections are one of them
@@ -186,9 +187,21 @@ fn run() -> Result<()> {
                 }
                 _ => None,
             };
-            // A refused set (matching's pair check: two vehicles) and one whose
-            // detections are another tracked vehicle's give the filter's prediction.
-            let coast = set.refused != 0 || elsewhere.is_some();
+            // Right after a gap in the sets (the target hidden), a pair the other
+            // vehicles put in doubt (`target_identity`, "After a gap").
+            identity.arrived(set.t_s);
+            let doubt = check
+                && set.refused == 0
+                && elsewhere.is_none()
+                && identity.reacquiring(set.t_s)
+                && identity.in_doubt();
+            if doubt {
+                stats.count("target_in_doubt", 1);
+            }
+            // A refused set (matching's pair check: two vehicles), one whose
+            // detections are another tracked vehicle's and one in doubt give the
+            // filter's prediction.
+            let coast = set.refused != 0 || elsewhere.is_some() || doubt;
             if set.refused != 0 {
                 stats.count("sets_refused", 1);
             }
