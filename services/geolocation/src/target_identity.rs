@@ -255,7 +255,8 @@ impl IdentityCheck {
         self.evidence.iter().any(|(_, e)| *e >= DOUBT)
     }
 
-    /// Forgets the evidence (a new segment, a restart, a filter still converging).
+    /// Forgets the evidence (a filter still converging; a new segment starts from
+    /// `IdentityCheck::default()`, which also forgets the sets' gap).
     pub fn clear(&mut self) {
         self.evidence.clear();
         self.coasting_since = None;
