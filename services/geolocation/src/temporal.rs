@@ -144,6 +144,14 @@ pub struct TemporalConfig {
     pub altitude_walk_m_per_sqrt_s: f64,
     /// Random-walk σ of each bias, °/√s (matches a drift of this many °/s over 1 s).
     pub bias_drift_deg_per_sqrt_s: f64,
+    /// Each bias also drifts at a rate the filter estimates (eq. (34): δψ = 0.2 t +
+    /// δψ₀; a real AHRS's heading drifts the same way between magnetometer fixes):
+    /// the rate's σ at the start and at a re-opening, °/s (0.2, eq. (34)'s rate as
+    /// 1σ; docs/temporal.md "The biases' drift": 0.3 gained little more on the tilted
+    /// and gimballed cameras and cost the nadir scenes' x more, 0.1 half the gain) ...
+    pub initial_bias_rate_sigma_deg_per_s: f64,
+    /// ... and its random walk, °/s/√s (a slow change of the drift).
+    pub bias_rate_walk_deg_per_s_per_sqrt_s: f64,
     /// σ of the first state: position (m), velocity (m/s) and biases (°). The
     /// position starts at the first window's estimate; the biases start at **zero**
     /// with this σ, as wide as a real AHRS's yaw error before any correction (not at
@@ -198,6 +206,8 @@ impl Default for TemporalConfig {
             acceleration_sigma_mps2: 1.5,
             altitude_walk_m_per_sqrt_s: 0.3,
             bias_drift_deg_per_sqrt_s: 0.2,
+            initial_bias_rate_sigma_deg_per_s: 0.2,
+            bias_rate_walk_deg_per_s_per_sqrt_s: 0.01,
             initial_position_sigma_m: 15.0,
             initial_velocity_sigma_mps: 8.0,
             initial_bias_sigma_deg: 45.0,
@@ -218,6 +228,8 @@ impl TemporalConfig {
             self.acceleration_sigma_mps2,
             self.altitude_walk_m_per_sqrt_s,
             self.bias_drift_deg_per_sqrt_s,
+            self.initial_bias_rate_sigma_deg_per_s,
+            self.bias_rate_walk_deg_per_s_per_sqrt_s,
             self.initial_position_sigma_m,
             self.initial_velocity_sigma_mps,
             self.initial_bias_sigma_deg,
@@ -277,7 +289,10 @@ pub struct TargetPrior {
 }
 
 /// Core states: x, y, z, v_x, v_y, δψ_L, δψ_R ...
-pub(crate) const CORE: usize = 7;
+pub(crate) const CORE: usize = 9;
+/// Index of the left UAV's bias rate (the right's follows): eq. (34)'s drift.
+const RATE: usize = 7;
+
 /// ... then, when either UAV's noise model has a correlated error, each UAV's
 /// correlated pose error (x, y, z, yaw, pitch, roll; zero with zero variance for the
 /// components that are white), starting at these indices.
@@ -610,9 +625,16 @@ impl TemporalEstimator {
         let out = TargetPrior {
             position: [s[0] + s[3] * dt, s[1] + s[4] * dt],
             covariance_xy: nalgebra::Matrix2::new(cov(0, 0), cov(0, 1), cov(1, 0), cov(1, 1)),
-            yaw_bias: [s[5], s[6]],
-            yaw_bias_covariance: nalgebra::Matrix2::new(p[(5, 5)], p[(5, 6)], p[(6, 5)], p[(6, 6)])
-                + nalgebra::Matrix2::identity() * qb,
+            yaw_bias: [s[5] + s[RATE] * dt, s[6] + s[RATE + 1] * dt],
+            yaw_bias_covariance: {
+                let b = |r: usize, c: usize| {
+                    p[(r, c)]
+                        + dt * (p[(r, c + 2)] + p[(r + 2, c)])
+                        + dt * dt * p[(r + 2, c + 2)]
+                };
+                nalgebra::Matrix2::new(b(5, 5), b(5, 6), b(6, 5), b(6, 6))
+                    + nalgebra::Matrix2::identity() * qb
+            },
         };
         let finite = out
             .position
@@ -702,7 +724,10 @@ impl TemporalEstimator {
             }));
         }
         let out = self.mixture(&kept, outs);
-        prune_and_merge(&mut kept, CORE);
+        // Hypotheses that agree on the target and both biases are one: their bias
+        // rates, observed over many seconds, are left out of the comparison (merging
+        // moment-matches them, their spread kept in the covariance).
+        prune_and_merge(&mut kept, RATE);
         self.bank = kept;
         Ok(out)
     }
@@ -746,7 +771,8 @@ impl TemporalEstimator {
                 s[5] = g.mean[0];
                 s[6] = g.mean[1];
                 let mut p = DMatrix::zeros(s.len(), s.len());
-                for (i, v) in [sp, sp, sp, sv, sv, g.sigma, g.sigma]
+                let sr = tc.initial_bias_rate_sigma_deg_per_s.to_radians();
+                for (i, v) in [sp, sp, sp, sv, sv, g.sigma, g.sigma, sr, sr]
                     .into_iter()
                     .enumerate()
                 {
@@ -887,6 +913,16 @@ impl TemporalEstimator {
             let qb = tc.bias_drift_deg_per_sqrt_s.to_radians().powi(2) * dt;
             q[(5, 5)] = qb;
             q[(6, 6)] = qb;
+            // Each bias drifts at its rate (eq. 34), the rate a slow random walk.
+            let qr = tc.bias_rate_walk_deg_per_s_per_sqrt_s.to_radians().powi(2);
+            for uav in 0..2 {
+                let (b, r) = (5 + uav, RATE + uav);
+                f[(b, r)] = dt;
+                q[(r, r)] = qr * dt;
+                q[(b, b)] += qr * dt.powi(3) / 3.0;
+                q[(b, r)] = qr * dt.powi(2) / 2.0;
+                q[(r, b)] = qr * dt.powi(2) / 2.0;
+            }
             // A keyframe's rays are corrected with the *current* bias, but its image
             // was taken under the bias of its capture time: its yaw error state holds
             // the difference, b(t_k) − b(t) plus its own yaw error (measured = true +
@@ -907,6 +943,8 @@ impl TemporalEstimator {
             };
             for uav in 0..2 {
                 for i in yaw_slots(uav) {
+                    // The bias's drift since moves that difference by −rate·dt.
+                    f[(i, RATE + uav)] = -dt;
                     q[(5 + uav, i)] = -qb;
                     q[(i, 5 + uav)] = -qb;
                     for j in yaw_slots(uav) {
@@ -971,8 +1009,8 @@ impl TemporalEstimator {
                 // AHRS's τ is 10 s. Cloned as if taken now, exact rays under the
                 // default Gauss–Markov model: NEES 3.3 / 3.1 (x, y / z, 2 / 1 if
                 // calibrated) in the first second; with the lag 2.5 / 1.2.
+                let lag = (t_s - image.t_s).max(0.0);
                 if let Some(g) = self.gm_block(id.0) {
-                    let lag = (t_s - image.t_s).max(0.0);
                     let corr = self.correlated(id.0);
                     let rho = corr.map(
                         |(sigma, tau)| {
@@ -996,6 +1034,23 @@ impl TemporalEstimator {
                         }
                         p[(n + j, n + j)] += corr[j].0.powi(2) * (1.0 - rho[j] * rho[j]);
                     }
+                }
+                // Taken `lag` seconds ago under the bias then: b(t − lag) − b(t) =
+                // −rate·lag on top of the yaw error (eq. 34's drift).
+                {
+                    let r = RATE + id.0.index();
+                    let yaw = n + 3;
+                    s[yaw] -= lag * s[r];
+                    for c in 0..n {
+                        let v = p[(yaw, c)] - lag * p[(r, c)];
+                        p[(yaw, c)] = v;
+                        p[(c, yaw)] = v;
+                    }
+                    // p[(yaw, yaw)] = var(old yaw part) − 2 lag cov(old, r) + lag² var(r)
+                    // (the old yaw part's covariance with r is in p[(yaw, r)] now minus
+                    // lag·var(r)).
+                    let cov_old_r = p[(yaw, r)] + lag * p[(r, r)];
+                    p[(yaw, yaw)] += -2.0 * lag * cov_old_r + lag * lag * p[(r, r)];
                 }
                 for j in 0..6 {
                     p[(n + j, n + j)] += sig[j].max(1e-6).powi(2);
@@ -1145,6 +1200,8 @@ impl TemporalEstimator {
             let sb = tc.reopen_bias_sigma_deg.to_radians().powi(2);
             let sp = tc.initial_position_sigma_m.powi(2);
             p[(5 + uav, 5 + uav)] += sb;
+            // Its rate too: before the re-opening the rate took up part of the step.
+            p[(RATE + uav, RATE + uav)] += tc.initial_bias_rate_sigma_deg_per_s.to_radians().powi(2);
             for i in 0..3 {
                 p[(i, i)] += sp;
             }
@@ -1934,9 +1991,17 @@ mod tests {
                 "seed {seed}: re-opened at {:?} s; bias errors at 24 s {stepped:.1?}° (no step: {calm:.1?}°)",
                 reopened.iter().map(|r| r.0).collect::<Vec<_>>()
             );
+            // Followed within 3 s: re-opened then, or (the bias rate taking part of
+            // the step) the left bias back within 3° of the truth by 15 s.
+            let left_error_at_15 = run
+                .iter()
+                .filter(|r| (14.0..15.0).contains(&r.0))
+                .map(|r| (r.1.estimate.yaw_bias[0] - r.3[0]).to_degrees().abs())
+                .fold(f64::INFINITY, f64::min);
+            eprintln!("seed {seed}: left bias error at 14–15 s {left_error_at_15:.1}°");
             assert!(
-                reopened.iter().any(|r| (12.0..15.0).contains(&r.0)),
-                "seed {seed}: not re-opened within 3 s"
+                reopened.iter().any(|r| (12.0..15.0).contains(&r.0)) || left_error_at_15 < 3.0,
+                "seed {seed}: not re-opened within 3 s, the left bias {left_error_at_15:.1}° off at 15 s"
             );
             for (t, e, _, _) in &reopened {
                 let c = &e.estimate.covariance;
@@ -1953,6 +2018,59 @@ mod tests {
                 "seed {seed}: {stepped:.1?}° against {calm:.1?}°"
             );
         }
+    }
+
+    /// Eq. (34)'s biases drift at 0.2°/s. A bias that only random-walks trails such a
+    /// drift: its error sat on the far side of the drift's sign in 15 of 16 UAV-runs
+    /// of the chain, |error| 1.1° against a stated 0.75° (docs/temporal.md "The biases'
+    /// drift"). With a rate state per bias the lag after 10 s is half the frozen
+    /// rate's and the error as large as stated (z² near 1); frozen at zero, the lag
+    /// and an overconfident bias show on the same flights (8 seeds, synthetic rays with
+    /// keyframes reused as the chain does).
+    #[test]
+    fn the_biases_follow_eq34s_drift() {
+        let sc = SyntheticScenario::default();
+        let rate = match sc.bias {
+            BiasModel::Eq34 { rate_deg_s, .. } => rate_deg_s,
+            _ => unreachable!("the default scenario's biases are eq. (34)'s"),
+        };
+        assert!(rate > 0.0);
+        // (mean error along the drift in °, mean z² of the bias errors) after 10 s.
+        let lag = |config: EstimatorConfig| {
+            let (mut along, mut z2, mut n) = (0.0, 0.0, 0usize);
+            for seed in 0..8 {
+                let (run, _) = fly_keyframes(&sc, config, 20.0, 900 + seed, Disturbance::default());
+                for (_, e, _, b) in run.iter().filter(|r| r.0 >= 10.0) {
+                    for i in 0..2 {
+                        let err = e.estimate.yaw_bias[i] - b[i];
+                        let var = e.estimate.covariance[(2 + i, 2 + i)];
+                        along += err.to_degrees();
+                        z2 += err * err / var;
+                        n += 1;
+                    }
+                }
+            }
+            (along / n as f64, z2 / n as f64)
+        };
+        let with_rate = lag(EstimatorConfig::default());
+        let mut frozen = EstimatorConfig::default();
+        frozen.temporal.initial_bias_rate_sigma_deg_per_s = 1e-9;
+        frozen.temporal.bias_rate_walk_deg_per_s_per_sqrt_s = 1e-9;
+        let without = lag(frozen);
+        eprintln!(
+            "bias error along the drift, z²: with the rate {:.2}°, {:.2}; frozen {:.2}°, {:.2}",
+            with_rate.0, with_rate.1, without.0, without.1
+        );
+        // Measured: −0.52°, z² 0.78 with the rate (σ 0.2°/s; −0.35° at 0.3°/s);
+        // −1.03°, z² 2.17 frozen.
+        assert!(
+            without.0 < -0.6 && with_rate.0.abs() < without.0.abs() - 0.3,
+            "lag with the rate {with_rate:.2?}, frozen {without:.2?}"
+        );
+        assert!(
+            (0.5..1.5).contains(&with_rate.1) && without.1 > 1.5,
+            "z² with the rate {with_rate:.2?}, frozen {without:.2?}"
+        );
     }
 
     /// A look-alike 12 m from the target taken by the right camera for two
