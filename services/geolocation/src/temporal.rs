@@ -148,7 +148,8 @@ pub struct TemporalConfig {
     /// δψ₀; a real AHRS's heading drifts the same way between magnetometer fixes):
     /// the rate's σ at the start and at a re-opening, °/s (0.2, eq. (34)'s rate as
     /// 1σ; docs/temporal.md "The biases' drift": 0.3 gained little more on the tilted
-    /// and gimballed cameras and cost the nadir scenes' x more, 0.1 half the gain) ...
+    /// and gimballed cameras and cost the nadir scenes' x more, 0.1 half the gain).
+    /// Held at zero for a UAV whose attitude error is correlated (`bias_rate`) ...
     pub initial_bias_rate_sigma_deg_per_s: f64,
     /// ... and its random walk, °/s/√s (a slow change of the drift).
     pub bias_rate_walk_deg_per_s_per_sqrt_s: f64,
@@ -2070,8 +2071,8 @@ mod tests {
             for seed in 0..8 {
                 let (run, _) = fly_keyframes(&sc, config, 20.0, 900 + seed, Disturbance::default());
                 for (_, e, _, b) in run.iter().filter(|r| r.0 >= 10.0) {
-                    for i in 0..2 {
-                        let err = e.estimate.yaw_bias[i] - b[i];
+                    for (i, truth) in b.iter().enumerate() {
+                        let err = e.estimate.yaw_bias[i] - truth;
                         let var = e.estimate.covariance[(2 + i, 2 + i)];
                         along += err.to_degrees();
                         z2 += err * err / var;
