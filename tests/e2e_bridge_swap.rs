@@ -17,6 +17,7 @@
 //! - Seed 2: the two cameras took different cars; every pair was refused as two
 //!   vehicles and, with no estimate, no gate brought them back: 73 %. A refused pair
 //!   now gives the filter's prediction (`sets_refused`), whose gate does.
+//! - On every seed, none of the target's estimates is of the look-alike (issue #23).
 
 #[path = "support/multi_target_eval.rs"]
 mod multi_target_eval;
@@ -45,5 +46,15 @@ fn the_targets_estimate_stays_on_the_target_after_the_bridge() {
         let counters = flown.counters(&name);
         let n = counters[counter].as_u64().unwrap_or(0);
         assert!(n > 0, "seed {seed}: no {counter}: {counters}");
+    }
+    // Issue #23's target: the look-alike is never the target's estimate, on any seed
+    // (`dualgeo run`, 2026-11-28: none on seeds 1–8 of the 24 s flights).
+    for seed in 1..=5 {
+        let name = format!("suite_traffic-{seed:03}");
+        let n = flown.look_alike_estimates(&name);
+        assert_eq!(
+            n, 0,
+            "seed {seed}: {n} of the target's estimates of the look-alike"
+        );
     }
 }

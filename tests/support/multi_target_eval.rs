@@ -68,6 +68,14 @@ impl Flown {
         target[1].as_f64().expect("located share")
     }
 
+    /// The target's estimates of a look-alike in run `name` (nearer a car coloured like
+    /// it than the target and over 2 m off, from the first estimate).
+    pub fn look_alike_estimates(&self, name: &str) -> u64 {
+        self.run(name)["look_alike_estimates"]
+            .as_u64()
+            .expect("look_alike_estimates")
+    }
+
     /// `dualgeo run`'s counters of flight `name`.
     pub fn counters(&self, name: &str) -> serde_json::Value {
         json(

@@ -2,8 +2,9 @@
 //! each cell against issue #23's target), `OUT/monte-carlo.json`, and the plot of the
 //! error against the stated 1σ over time, pooled over seeds.
 
-use super::mc_stats::{quantile, SceneSummary, LOOK_ALIKE_MIN_M, TRUST_M};
+use super::mc_stats::{quantile, SceneSummary, TRUST_M};
 use super::monte_carlo::{Flown, NavModel, SceneRuns, WARM_UP_S};
+use crate::score::look_alike::LOOK_ALIKE_MIN_M;
 use std::fmt::Write;
 
 /// Issue #23's targets.
@@ -53,7 +54,7 @@ pub fn section(
     let runs: usize = all.iter().map(|s| s.runs.len()).sum();
     let _ = writeln!(
         w,
-        "Each scene is flown over many seeds (navigation and image noise, the target's start on its route, the signs of the eq. (34) bias offset and drift), {duration_s:.0} s each, every {every} pair(s), under the paper's Table 2 errors (σ_att 2°, σ_pos 3 m, |δψ0| = 20°), through the same chain and default estimator as `dualgeo run`. {runs} runs: the last call flew {} of them in {seconds:.0} s on this 2-core machine and read {} back from `monte-carlo/runs/`. \"After {WARM_UP_S:.0} s\" columns count estimates from t = {WARM_UP_S:.0} s; calibration columns count every estimate from the first.\n",
+        "Each scene is flown over many seeds (navigation and image noise, the target's start on its route, the signs of the eq. (34) bias offset and drift), {duration_s:.0} s each, every {every} pair(s), under the paper's Table 2 errors (σ_att 2°, σ_pos 3 m, |δψ0| = 20°), through the same vision chain and default estimator as `dualgeo run`, in one process. Not in it: the geolocation service's check of the target's detections against the other vehicles' tracks (`geolocation::target_identity`), which only a scene with traffic exercises; `dualgeo run` itself on the same `suite_traffic` flights is scored in [multi-target-seeds.md](multi-target-seeds.md). {runs} runs: the last call flew {} of them in {seconds:.0} s on this 2-core machine and read {} back from `monte-carlo/runs/`. \"After {WARM_UP_S:.0} s\" columns count estimates from t = {WARM_UP_S:.0} s; calibration columns count every estimate from the first.\n",
         flown.flown, flown.reused
     );
     let _ = writeln!(w, "- **located**: pairs after {WARM_UP_S:.0} s with the target in both images that have an estimate (target ≥ 90 %), and estimates made while it was not; **of a look-alike**: estimates (from the first) horizontally nearer a car coloured like the target than the target and over {LOOK_ALIKE_MIN_M} m from it (target: none).");

@@ -19,25 +19,9 @@ pub struct EstimateRow {
     pub visible: bool,
     /// The filter's quality state (`geolocation::Quality` as its index).
     pub quality: u8,
-    /// An estimate of a look-alike: horizontally nearer a car coloured like the target
-    /// than the target, and more than [`LOOK_ALIKE_MIN_M`] from the target (truth).
+    /// An estimate of a look-alike ([`crate::score::look_alike::of_a_look_alike`]).
     #[serde(default)]
     pub look_alike: bool,
-}
-
-/// An estimate this near the target is the target's, whatever else is near.
-pub const LOOK_ALIKE_MIN_M: f64 = 2.0;
-
-/// Whether an estimate `err` (estimate − target) off the target is one of the
-/// look-alikes at `look_alikes` (ENU, relative to the same origin as `target`).
-pub fn of_a_look_alike(
-    estimate: [f64; 3],
-    target: [f64; 3],
-    look_alikes: impl IntoIterator<Item = [f64; 3]>,
-) -> bool {
-    let h = |a: [f64; 3], b: [f64; 3]| (a[0] - b[0]).hypot(a[1] - b[1]);
-    let to_target = h(estimate, target);
-    to_target > LOOK_ALIKE_MIN_M && look_alikes.into_iter().any(|l| h(estimate, l) < to_target)
 }
 
 impl EstimateRow {
@@ -401,24 +385,6 @@ mod tests {
             quality: 1,
             look_alike: false,
         }
-    }
-
-    #[test]
-    fn an_estimate_nearer_a_look_alike_than_the_target_is_of_the_look_alike() {
-        let target = [0.0, 0.0, 13.5];
-        let look_alike = [20.0, 3.5, 13.5];
-        // On the target, or near it with the look-alike beside: the target's.
-        assert!(!of_a_look_alike([0.5, 0.5, 13.0], target, [look_alike]));
-        assert!(!of_a_look_alike(
-            [1.5, 1.0, 13.0],
-            target,
-            [[1.0, 3.5, 13.5]]
-        ));
-        // Nearer the look-alike and over 2 m from the target: the look-alike's.
-        assert!(of_a_look_alike([18.0, 3.0, 13.0], target, [look_alike]));
-        // Far from both, nearer the target: a bad estimate, not a look-alike's.
-        assert!(!of_a_look_alike([-9.0, 0.0, 13.0], target, [look_alike]));
-        assert!(!of_a_look_alike([18.0, 3.0, 13.0], target, []));
     }
 
     /// Runs whose altitudes are each a few metres off (a correlated GPS error) give a

@@ -92,9 +92,9 @@ pub struct EvaluateArgs {
     /// Run every Monte Carlo run again instead of reusing the kept ones.
     #[arg(long)]
     pub fresh: bool,
-    /// Only several targets over seeds (issue #26): `multi_town` (or `--scenes`) over
-    /// `--scene-seeds` seeds (default 8; 2 with --quick) through `dualgeo run` and
-    /// `dualgeo score`; `--mc-duration-s` shortens the runs. Writes
+    /// Only several targets over seeds (issue #26): `multi_town` and `suite_traffic` (or
+    /// `--scenes`) over `--scene-seeds` seeds (default 8; 2 with --quick) through
+    /// `dualgeo run` and `dualgeo score`; `--mc-duration-s` shortens the runs. Writes
     /// OUT/multi-target-seeds.md and OUT/multi-target-seeds.json; runs are kept in
     /// OUT/multi-target-seeds/runs/ and reused.
     #[arg(long, conflicts_with_all = ["suite_only", "no_suite", "monte_carlo"])]
@@ -344,7 +344,7 @@ pub fn run(args: &EvaluateArgs) -> Result<()> {
     if args.multi_target {
         let plan = multi_target::Plan {
             scenes: if args.scenes.is_empty() {
-                vec!["multi_town".to_string()]
+                vec!["multi_town".to_string(), "suite_traffic".to_string()]
             } else {
                 args.scenes.clone()
             },

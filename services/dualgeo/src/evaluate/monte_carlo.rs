@@ -11,10 +11,11 @@
 //! are kept in `OUT/monte-carlo/runs/` under a key of everything that decides them, so
 //! an interrupted report resumes where it stopped (`--fresh` ignores them).
 
-use super::mc_stats::{of_a_look_alike, summarise, EstimateRow, RunRecord, SceneSummary};
+use super::mc_stats::{summarise, EstimateRow, RunRecord, SceneSummary};
 use super::noise::estimator_for;
 use super::stream::{Lane, SceneStream};
 use super::suite::with_protocol;
+use crate::score::look_alike::of_a_look_alike;
 use acquisition::sim::texture::hash;
 use acquisition::sim::{Presets, SimConfig};
 use anyhow::{Context, Result};

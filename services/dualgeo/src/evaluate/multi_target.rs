@@ -9,9 +9,10 @@
 //! every run again).
 
 use super::monte_carlo::{seeded, NavModel};
-use crate::score::{input, metrics};
+use crate::score::{input, look_alike, metrics};
 use acquisition::recording::ImageEncoding;
-use acquisition::sim::{record, Presets, Simulator};
+use acquisition::sim::render::VEHICLE_TOP_BGR;
+use acquisition::sim::{record, Presets, SimConfig, Simulator};
 use anyhow::{bail, Context, Result};
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
@@ -24,8 +25,8 @@ pub type VehicleFigures = (u32, f64, Option<[f64; 3]>, Option<f64>, Option<f64>)
 
 /// Bump when a change makes kept runs stale (the chain, the scorer, the seeding; 15:
 /// the camera swing, refused pairs' predictions and the identity test; 16: the yaw
-/// biases' rate states).
-const RUN_FORMAT: u32 = 16;
+/// biases' rate states; 17: the target's estimates of a look-alike counted).
+const RUN_FORMAT: u32 = 17;
 
 /// What the evaluation runs.
 #[derive(Debug, Clone)]
@@ -63,6 +64,21 @@ pub struct RunScore {
     pub located_share: f64,
     pub per_vehicle: Vec<VehicleFigures>,
     pub yaw_bias_mae_deg: Option<[f64; 2]>,
+    /// The target's estimates (track 0, from the first) of a moving car coloured like
+    /// it ([`look_alike::target_on_look_alike`]).
+    #[serde(default)]
+    pub look_alike_estimates: u64,
+}
+
+/// The truth_targets.csv ids (1 + the traffic index) of the moving cars whose roof is
+/// the target's colour.
+fn look_alike_ids(config: &SimConfig) -> Vec<u32> {
+    let target = config.vehicle.colour_bgr.unwrap_or(VEHICLE_TOP_BGR);
+    (0u32..)
+        .zip(&config.traffic)
+        .filter(|(_, car)| car.colour_bgr == target && car.speed_factor > 0.0)
+        .map(|(i, _)| i + 1)
+        .collect()
 }
 
 fn run_path(plan: &Plan, scene: &str, seed: u64) -> PathBuf {
@@ -87,6 +103,7 @@ fn fly(plan: &Plan, presets: &Presets, scene: &str, seed: u64) -> Result<RunScor
     }
     let frame_rate = config.frame_rate_hz;
     let duration_s = config.duration_s;
+    let look_alikes = look_alike_ids(&config);
     let scratch = tempfile::tempdir().context("a scratch folder")?;
     let work = match &plan.keep_flights {
         Some(dir) => {
@@ -134,6 +151,8 @@ fn fly(plan: &Plan, presets: &Presets, scene: &str, seed: u64) -> Result<RunScor
         );
     }
     let yaw_bias_mae_deg = loaded.yaw_bias_mae_deg();
+    let look_alike_estimates =
+        look_alike::target_on_look_alike(&rec, &out.join("track.csv"), &look_alikes)?;
     Ok(RunScore {
         format: RUN_FORMAT,
         scene: scene.to_string(),
@@ -161,6 +180,7 @@ fn fly(plan: &Plan, presets: &Presets, scene: &str, seed: u64) -> Result<RunScor
             })
             .collect(),
         yaw_bias_mae_deg,
+        look_alike_estimates,
     })
 }
 
@@ -258,8 +278,8 @@ pub fn report(runs: &[RunScore], command: &str, wall_s: f64) -> String {
             .collect();
         out += &format!(
             "## {scene}: {} seeds\n\nMedian (range) over seeds.\n\n\
-             | GOSPA (m) | MOTA | IDF1 | (vehicle, pair) located | identity switches per vehicle-minute | yaw-bias MAE L / R (°) |\n\
-             | --- | --- | --- | --- | --- | --- |\n",
+             | GOSPA (m) | MOTA | IDF1 | (vehicle, pair) located | identity switches per vehicle-minute | yaw-bias MAE L / R (°) | the target's estimates of a look-alike |\n\
+             | --- | --- | --- | --- | --- | --- | --- |\n",
             rs.len()
         );
         let bias = |k: usize| -> Vec<f64> {
@@ -275,8 +295,15 @@ pub fn report(runs: &[RunScore], command: &str, wall_s: f64) -> String {
                 format!("{:.2}", median(b))
             }
         };
+        let look_alikes: u64 = rs.iter().map(|r| r.look_alike_estimates).sum();
+        let look_alike_runs = rs.iter().filter(|r| r.look_alike_estimates > 0).count();
+        let look_alike_cell = match look_alike_runs {
+            0 => "0".to_string(),
+            1 => format!("**{look_alikes}** in 1 run"),
+            n => format!("**{look_alikes}** in {n} runs"),
+        };
         out += &format!(
-            "| {} | {} | {} | {} | {} | {} / {} |\n\n",
+            "| {} | {} | {} | {} | {} | {} / {} | {look_alike_cell} |\n\n",
             cell(col(|r| r.gospa_m), 2),
             cell(col(|r| r.mota), 2),
             cell(col(|r| r.idf1), 2),
@@ -383,6 +410,7 @@ mod tests {
                 (1, share, None, None, None),
             ],
             yaw_bias_mae_deg: Some([2.0, 3.0]),
+            look_alike_estimates: seed - 1,
         }
     }
 
@@ -408,6 +436,7 @@ mod tests {
             ),
             "{text}"
         );
-        assert!(text.contains("| 2.00 / 3.00 |"), "{text}");
+        // Of a look-alike: 0, 1 and 2 estimates.
+        assert!(text.contains("| 2.00 / 3.00 | **3** in 2 runs |"), "{text}");
     }
 }

@@ -5,6 +5,7 @@
 //! scored, made here or elsewhere. Evaluation only: no stage reads truth.
 
 pub mod input;
+pub mod look_alike;
 pub mod metrics;
 
 use anyhow::{Context, Result};
