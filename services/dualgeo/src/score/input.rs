@@ -142,6 +142,18 @@ fn wrap_deg(d: f64) -> f64 {
     (d + 180.0).rem_euclid(360.0) - 180.0
 }
 
+/// The index of the pair time in `times` (ascending) nearest `t_s`, if within
+/// `half_period` of it: the pair a track.csv row belongs to.
+pub fn nearest_pair(times: &[f64], t_s: f64, half_period: f64) -> Option<usize> {
+    let i = times.partition_point(|t| *t < t_s);
+    [i.checked_sub(1), Some(i)]
+        .into_iter()
+        .flatten()
+        .filter(|&j| j < times.len())
+        .min_by(|&a, &b| (times[a] - t_s).abs().total_cmp(&(times[b] - t_s).abs()))
+        .filter(|&j| (times[j] - t_s).abs() < half_period)
+}
+
 /// A vehicle in one image: id, point, whether the image shows it.
 type Seen = (u32, [f64; 3], bool);
 
@@ -184,18 +196,7 @@ pub fn load(recording: &Path, track: &Path, warm_up_s: f64) -> Result<Loaded> {
     let mut estimates: Vec<Vec<TrackRow>> = vec![Vec::new(); pairs.len()];
     let mut unpaired_rows = 0;
     for row in read_track(track)? {
-        let i = times.partition_point(|t| *t < row.t_s);
-        let nearest = [i.checked_sub(1), Some(i)]
-            .into_iter()
-            .flatten()
-            .filter(|&j| j < times.len())
-            .min_by(|&a, &b| {
-                (times[a] - row.t_s)
-                    .abs()
-                    .total_cmp(&(times[b] - row.t_s).abs())
-            })
-            .filter(|&j| (times[j] - row.t_s).abs() < half_period);
-        match nearest {
+        match nearest_pair(&times, row.t_s, half_period) {
             Some(j) => estimates[j].push(row),
             None => unpaired_rows += 1,
         }

@@ -4,7 +4,7 @@
 //! with [`of_a_look_alike`]; [`target_on_look_alike`] scores a `dualgeo run` output
 //! against a recording's truth_targets.csv the same way. Evaluation only.
 
-use super::input::read_track;
+use super::input::{nearest_pair, read_track};
 use acquisition::recording::{read_targets_truth, Recording, TRUTH_TARGETS_FILE};
 use anyhow::{Context, Result};
 use shared_types::conventions::Uav;
@@ -51,24 +51,18 @@ pub fn target_on_look_alike(recording: &Path, track: &Path, look_alike_ids: &[u3
             .insert(row.target_id, row.target);
     }
     let half_period = 0.5 / rec.meta.frame_rate_hz;
-    let pairs: Vec<(f64, u64)> = rec
+    let (times, frames): (Vec<f64>, Vec<u64>) = rec
         .pairs()
         .iter()
         .map(|p| {
             let left = &rec.telemetry[p.left];
             (left.t_s, left.frame)
         })
-        .collect();
+        .unzip();
     let mut count = 0;
     for row in read_track(track)?.into_iter().filter(|r| r.track_id == 0) {
-        let i = pairs.partition_point(|p| p.0 < row.t_s);
-        let nearest = [i.checked_sub(1), Some(i)]
-            .into_iter()
-            .flatten()
-            .filter_map(|j| pairs.get(j))
-            .min_by(|a, b| (a.0 - row.t_s).abs().total_cmp(&(b.0 - row.t_s).abs()))
-            .filter(|p| (p.0 - row.t_s).abs() < half_period);
-        let Some(vehicles) = nearest.and_then(|p| at.get(&p.1)) else {
+        let nearest = nearest_pair(&times, row.t_s, half_period);
+        let Some(vehicles) = nearest.and_then(|j| at.get(&frames[j])) else {
             continue;
         };
         let Some(&target) = vehicles.get(&0) else {
