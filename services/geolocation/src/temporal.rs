@@ -575,9 +575,9 @@ impl TemporalEstimator {
         out
     }
 
-    /// Residual, its measurement covariance and its Jacobian over the whole state.
-    /// The ray's residual at `s`, and its Jacobian at `s` with the target's x, y
-    /// moved to `horizontal` when given ([`JacobianAt`]).
+    /// The ray's residual at `s`, its measurement covariance and its Jacobian over the
+    /// whole state, taken at `s` with the target's x, y moved to `horizontal` when
+    /// given ([`JacobianAt`]).
     fn linearise(
         &self,
         ray: &Ray,
