@@ -21,9 +21,10 @@
 //!   (under the bridge: ~1.3 s) coasts on its prediction and takes its fixes again
 //!   when it comes out: its id is kept.
 //!
-//! **Restart**: [`Tracks::snapshot`] and [`Tracks::restore`] carry every track, the next
-//! id and the noise scale across a restart of the geolocation service (its
-//! checkpoint): ids stay stable.
+//! **Restart**: [`Tracks::snapshot`] and [`Tracks::restore`] carry every track (with its
+//! colour), the deleted tracks still remembered for re-identification, the next id and
+//! the noise scale across a restart of the geolocation service (its checkpoint): ids
+//! stay stable, also for a vehicle hidden when the service restarted.
 //!
 //! Not yet: a fix's error is taken as independent from pair to pair although the
 //! shared biases' error is not.
@@ -198,8 +199,7 @@ struct Track {
     updated: bool,
     /// It has been seen moving (reported from then on).
     moved: bool,
-    /// Running mean of its fixes' colours (BGR), when they have one. Not in the
-    /// checkpoint: a restored track learns it again from its next fixes.
+    /// Running mean of its fixes' colours (BGR), when they have one.
     colour: Option<[f64; 3]>,
 }
 
@@ -231,8 +231,7 @@ const COLOUR_ALPHA: f64 = 0.1;
 pub struct Tracks {
     config: TrackConfig,
     tracks: Vec<Track>,
-    /// Deleted tracks still remembered (not checkpointed: after a restart a vehicle
-    /// gone before it gets a new id).
+    /// Deleted tracks still remembered for re-identification.
     lost: Vec<Lost>,
     next_id: u32,
     counts: TrackCounts,
@@ -270,14 +269,34 @@ pub struct TrackState {
     pub hits: u32,
     pub pairs: u32,
     pub moved: bool,
+    /// Running mean of its fixes' colours (BGR), if any has had one.
+    pub colour: Option<[f64; 3]>,
+}
+
+/// A deleted track still remembered, as a checkpoint keeps it.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct LostState {
+    pub id: u32,
+    /// (x, y) and (v_east, v_north) at its last fix.
+    pub position: [f64; 2],
+    pub velocity: [f64; 2],
+    pub last_fix_s: f64,
+    pub colour: [f64; 3],
+    pub moved: bool,
 }
 
 /// [`Tracks`] as a checkpoint keeps them.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct TracksSnapshot {
     pub tracks: Vec<TrackState>,
+    pub lost: Vec<LostState>,
     pub next_id: u32,
     pub noise_scale: f64,
+}
+
+/// A checkpointed colour (BGR) is three finite channels within 0–255.
+fn colour_in_range(colour: &[f64; 3]) -> bool {
+    colour.iter().all(|c| (0.0..=255.0).contains(c))
 }
 
 /// Speed uncertainty of a new track (1σ, m/s): a car in town.
@@ -309,7 +328,8 @@ impl Tracks {
         std::mem::take(&mut self.counts)
     }
 
-    /// Every track, the next id and the noise scale, for a checkpoint.
+    /// Every track, the remembered deleted ones, the next id and the noise scale, for a
+    /// checkpoint.
     pub fn snapshot(&self) -> TracksSnapshot {
         TracksSnapshot {
             tracks: self
@@ -328,6 +348,19 @@ impl Tracks {
                     hits: t.hits,
                     pairs: t.pairs,
                     moved: t.moved,
+                    colour: t.colour,
+                })
+                .collect(),
+            lost: self
+                .lost
+                .iter()
+                .map(|l| LostState {
+                    id: l.id,
+                    position: [l.position.x, l.position.y],
+                    velocity: [l.velocity.x, l.velocity.y],
+                    last_fix_s: l.last_fix_s,
+                    colour: l.colour,
+                    moved: l.moved,
                 })
                 .collect(),
             next_id: self.next_id,
@@ -337,13 +370,19 @@ impl Tracks {
 
     /// Tracks from a checkpoint, refused (with the reason) when a value is not finite
     /// or out of its range (a negative variance, a covariance not symmetric, a
-    /// tentative track older than its window), an id repeats or is not below the next
-    /// id, or there are more than `4 × max_tracks` + 64 of them (a checkpoint is read
-    /// from disk: untrusted).
+    /// tentative track older than its window, a colour outside 0–255), an id repeats
+    /// (among the tracks and the remembered ones) or is not below the next id, or
+    /// there are more than `4 × max_tracks` + 64 tracks or remembered ones (a
+    /// checkpoint is read from disk: untrusted).
     pub fn restore(config: TrackConfig, snap: &TracksSnapshot) -> Result<Self, String> {
         let mut tracks = Self::new(config)?;
-        if snap.tracks.len() > 4 * config.max_tracks + 64 {
-            return Err(format!("{} tracks", snap.tracks.len()));
+        let most = 4 * config.max_tracks + 64;
+        if snap.tracks.len() > most || snap.lost.len() > most {
+            return Err(format!(
+                "{} tracks, {} remembered",
+                snap.tracks.len(),
+                snap.lost.len()
+            ));
         }
         let (lo, hi) = NOISE_SCALE_RANGE;
         if !(lo..=hi).contains(&snap.noise_scale) || !(1..u32::MAX / 2).contains(&snap.next_id) {
@@ -356,7 +395,8 @@ impl Tracks {
                     .chain(&t.p)
                     .chain(&t.persistent_xy)
                     .chain([&t.z, &t.z_var, &t.persistent_z_var, &t.t_s, &t.last_fix_s])
-                    .all(|v| v.is_finite());
+                    .all(|v| v.is_finite())
+                    && t.colour.as_ref().is_none_or(colour_in_range);
             if !finite {
                 return Err(format!("track {} is not finite", t.id));
             }
@@ -399,7 +439,32 @@ impl Tracks {
                 pairs: t.pairs,
                 updated: false,
                 moved: t.moved,
-                colour: None,
+                colour: t.colour,
+            });
+        }
+        for l in &snap.lost {
+            let finite = l
+                .position
+                .iter()
+                .chain(&l.velocity)
+                .chain([&l.last_fix_s])
+                .all(|v| v.is_finite());
+            if !finite || !colour_in_range(&l.colour) {
+                return Err(format!("remembered track {} is out of range", l.id));
+            }
+            if l.id == 0 || l.id >= snap.next_id || !ids.insert(l.id) {
+                return Err(format!(
+                    "remembered track id {} is 0, repeats or is not below {}",
+                    l.id, snap.next_id
+                ));
+            }
+            tracks.lost.push(Lost {
+                id: l.id,
+                position: Vector2::from(l.position),
+                velocity: Vector2::from(l.velocity),
+                last_fix_s: l.last_fix_s,
+                colour: l.colour,
+                moved: l.moved,
             });
         }
         tracks.next_id = snap.next_id;
@@ -910,15 +975,27 @@ mod tests {
             colour_bgr: Some([200.0, 80.0, 20.0]),
             ..fix(x, y)
         };
-        let run = |reid_after_s: f64, returning: &dyn Fn(f64, f64) -> OtherFix| {
-            let mut tracks = Tracks::new(TrackConfig {
+        let run_restarted = |reid_after_s: f64,
+                             returning: &dyn Fn(f64, f64) -> OtherFix,
+                             restart_at_s: Option<f64>| {
+            let config = TrackConfig {
                 reid_after_s,
                 ..TrackConfig::default()
-            })
-            .unwrap();
+            };
+            let mut tracks = Tracks::new(config).unwrap();
             let mut ids = std::collections::BTreeSet::new();
+            let mut reidentified = 0;
             for k in 0..(14.0 / DT) as usize {
                 let t = k as f64 * DT;
+                if restart_at_s.is_some_and(|r| (t - r).abs() < 0.5 * DT) {
+                    // The service restarts from its checkpoint while the car is hidden
+                    // (its track deleted at ~6 s).
+                    assert_eq!(tracks.lost.len(), 1, "nothing remembered at {t} s");
+                    reidentified += tracks.take_counts().reidentified;
+                    let bytes = shared_types::checkpoint::encode(7, &tracks.snapshot()).unwrap();
+                    let snap: TracksSnapshot = shared_types::checkpoint::decode(7, &bytes).unwrap();
+                    tracks = Tracks::restore(config, &snap).unwrap();
+                }
                 // 10 m/s for 3 s, hidden for 7 s while slowing to 6 m/s, then seen again.
                 let y = if t < 3.0 {
                     10.0 * t
@@ -932,8 +1009,19 @@ mod tests {
                 };
                 ids.extend(tracks.update(t, &fixes, None).iter().map(|r| r.id));
             }
-            (ids.into_iter().collect::<Vec<_>>(), tracks.take_counts())
+            let mut c = tracks.take_counts();
+            c.reidentified += reidentified;
+            (ids.into_iter().collect::<Vec<_>>(), c)
         };
+        let run = |reid_after_s: f64, returning: &dyn Fn(f64, f64) -> OtherFix| {
+            run_restarted(reid_after_s, returning, None)
+        };
+        // A restart while it is hidden forgets nothing.
+        let (ids, c) = run_restarted(10.0, &yellow, Some(8.0));
+        assert_eq!(ids, vec![1]);
+        assert_eq!(c.reidentified, 1);
+        let (ids, _) = run_restarted(10.0, &blue, Some(8.0));
+        assert_eq!(ids, vec![1, 2]);
         let (ids, c) = run(10.0, &yellow);
         assert_eq!(ids, vec![1]);
         assert_eq!((c.deleted, c.reidentified), (1, 1));
@@ -1061,6 +1149,47 @@ mod tests {
         let mut good = snap.clone();
         good.tracks[0].persistent_xy = [1.0, 0.5, 0.5, 1.0];
         assert!(Tracks::restore(config, &good).is_ok());
+        let mut bad = snap.clone();
+        bad.tracks[0].colour = Some([0.0, 300.0, 0.0]);
+        assert!(Tracks::restore(config, &bad).is_err());
+        // A remembered (deleted) track: finite, coloured within 0–255, its id its own.
+        let mut with_lost = snap.clone();
+        with_lost.next_id = snap.next_id + 1;
+        with_lost.lost = vec![LostState {
+            id: snap.next_id,
+            position: [1.0, 2.0],
+            velocity: [0.0, 5.0],
+            last_fix_s: 1.0,
+            colour: [0.0, 200.0, 220.0],
+            moved: true,
+        }];
+        assert!(Tracks::restore(config, &with_lost).is_ok());
+        for broken in [
+            LostState {
+                position: [f64::NAN, 0.0],
+                ..with_lost.lost[0].clone()
+            },
+            LostState {
+                colour: [-1.0, 0.0, 0.0],
+                ..with_lost.lost[0].clone()
+            },
+            LostState {
+                id: snap.tracks[0].id,
+                ..with_lost.lost[0].clone()
+            },
+            LostState {
+                id: with_lost.next_id,
+                ..with_lost.lost[0].clone()
+            },
+            LostState {
+                id: 0,
+                ..with_lost.lost[0].clone()
+            },
+        ] {
+            let mut bad = with_lost.clone();
+            bad.lost = vec![broken];
+            assert!(Tracks::restore(config, &bad).is_err(), "{:?}", bad.lost);
+        }
         let mut bad = snap;
         bad.next_id = u32::MAX;
         assert!(Tracks::restore(config, &bad).is_err());

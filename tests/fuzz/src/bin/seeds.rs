@@ -369,7 +369,8 @@ fn main() {
     println!("seed corpus written to {}", dir.display());
 }
 
-/// Two vehicles' tracks, confirmed, as the geolocation service checkpoints them.
+/// Two vehicles' tracks, confirmed, and a third deleted and remembered for
+/// re-identification, as the geolocation service checkpoints them.
 fn tracks_snapshot() -> geolocation::tracks::TracksSnapshot {
     use geolocation::shared_bias::OtherFix;
     let mut tracks = geolocation::tracks::Tracks::new(Default::default()).expect("tracks");
@@ -382,10 +383,21 @@ fn tracks_snapshot() -> geolocation::tracks::TracksSnapshot {
         altitude_bias_sensitivity: [4.0, -6.0],
         persistent_z_var: 0.4,
         altitude_std_error_m: 0.5,
-        colour_bgr: None,
+        colour_bgr: Some([0.0, 200.0, 220.0]),
     };
-    for k in 0..5 {
-        tracks.update(k as f64 / 30.0, &[fix(0.0), fix(20.0)], None);
+    // The third goes out of view after 5 pairs; its track is deleted 3 s later.
+    for k in 0..130 {
+        let fixes = if k < 5 {
+            vec![fix(0.0), fix(20.0), fix(40.0)]
+        } else {
+            vec![fix(0.0), fix(20.0)]
+        };
+        tracks.update(k as f64 / 30.0, &fixes, None);
     }
-    tracks.snapshot()
+    let snapshot = tracks.snapshot();
+    assert!(
+        snapshot.tracks.len() == 2 && snapshot.lost.len() == 1,
+        "the seed must hold two tracks and one remembered"
+    );
+    snapshot
 }
