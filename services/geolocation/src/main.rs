@@ -89,6 +89,8 @@ fn resume(
             Err(e) => {
                 stats.count("checkpoint_refused", 1);
                 tracing::warn!("tracks ignored, starting fresh: {e}");
+                // Fresh tracks, but no id given twice.
+                tracks.keep_ids_below(snap.next_id);
             }
         }
     }

@@ -294,6 +294,12 @@ pub struct TracksSnapshot {
     pub noise_scale: f64,
 }
 
+/// Most tracks, and most remembered deleted ones, a checkpoint may hold (and so the
+/// most deleted tracks remembered: the oldest go first).
+fn most_kept(config: &TrackConfig) -> usize {
+    4 * config.max_tracks + 64
+}
+
 /// A checkpointed colour (BGR) is three finite channels within 0–255.
 fn colour_in_range(colour: &[f64; 3]) -> bool {
     colour.iter().all(|c| (0.0..=255.0).contains(c))
@@ -322,6 +328,15 @@ impl Tracks {
     pub fn start_over(&mut self) {
         self.tracks.clear();
         self.lost.clear();
+    }
+
+    /// A refused checkpoint's next id, so that a fresh start never gives an id again
+    /// (a CoT or GeoJSON client must not take a new vehicle for an old one); ignored
+    /// unless it is in range and above today's.
+    pub fn keep_ids_below(&mut self, next_id: u32) {
+        if (1..u32::MAX / 2).contains(&next_id) {
+            self.next_id = self.next_id.max(next_id);
+        }
     }
 
     pub fn take_counts(&mut self) -> TrackCounts {
@@ -376,7 +391,7 @@ impl Tracks {
     /// checkpoint is read from disk: untrusted).
     pub fn restore(config: TrackConfig, snap: &TracksSnapshot) -> Result<Self, String> {
         let mut tracks = Self::new(config)?;
-        let most = 4 * config.max_tracks + 64;
+        let most = most_kept(&config);
         if snap.tracks.len() > most || snap.lost.len() > most {
             return Err(format!(
                 "{} tracks, {} remembered",
@@ -395,10 +410,12 @@ impl Tracks {
                     .chain(&t.p)
                     .chain(&t.persistent_xy)
                     .chain([&t.z, &t.z_var, &t.persistent_z_var, &t.t_s, &t.last_fix_s])
-                    .all(|v| v.is_finite())
-                    && t.colour.as_ref().is_none_or(colour_in_range);
+                    .all(|v| v.is_finite());
             if !finite {
                 return Err(format!("track {} is not finite", t.id));
+            }
+            if !t.colour.as_ref().is_none_or(colour_in_range) {
+                return Err(format!("track {}'s colour is outside 0–255", t.id));
             }
             let p = Matrix4::from_row_slice(&t.p);
             let symmetric = (p - p.transpose()).abs().max() <= 1e-9 * (1.0 + p.abs().max());
@@ -674,6 +691,14 @@ impl Tracks {
             keep
         });
         self.lost.extend(deleted);
+        let most = most_kept(&c);
+        if self.lost.len() > most {
+            // Re-identification takes entries out anywhere: order by age first.
+            self.lost
+                .sort_by(|a, b| a.last_fix_s.total_cmp(&b.last_fix_s));
+            let excess = self.lost.len() - most;
+            self.lost.drain(..excess);
+        }
         self.counts = counts;
         self.next_id = next_id;
         for t in self.tracks.iter_mut().filter(|t| t.id != 0 && !t.moved) {
@@ -1032,6 +1057,34 @@ mod tests {
         assert_eq!(ids, vec![1, 2]);
     }
 
+    /// The deleted tracks remembered are capped (a long `reid_after_s` on a busy road),
+    /// the oldest dropped first, so a checkpoint never holds more than its restore takes.
+    #[test]
+    fn the_remembered_tracks_are_capped_oldest_first() {
+        let config = TrackConfig {
+            reid_after_s: 1e6,
+            ..TrackConfig::default()
+        };
+        let mut tracks = Tracks::new(config).unwrap();
+        let most = most_kept(&config);
+        tracks.next_id = most as u32 + 11;
+        tracks.lost = (0..most + 10)
+            .rev()
+            .map(|k| Lost {
+                id: k as u32 + 1,
+                position: Vector2::new(1000.0 * k as f64, 0.0),
+                velocity: Vector2::zeros(),
+                last_fix_s: k as f64,
+                colour: [0.0, 200.0, 220.0],
+                moved: true,
+            })
+            .collect();
+        tracks.update(100.0, &[], None);
+        assert_eq!(tracks.lost.len(), most);
+        assert!(tracks.lost.iter().all(|l| l.last_fix_s >= 10.0));
+        assert!(Tracks::restore(config, &tracks.snapshot()).is_ok());
+    }
+
     /// A red car's track does not take a yellow car's fix 1.5 m from its prediction
     /// (after a bridge the two come out side by side): it coasts, and the yellow car
     /// starts a track of its own.
@@ -1152,6 +1205,15 @@ mod tests {
         let mut bad = snap.clone();
         bad.tracks[0].colour = Some([0.0, 300.0, 0.0]);
         assert!(Tracks::restore(config, &bad).is_err());
+        let mut bad = snap.clone();
+        bad.tracks[0].colour = Some([0.0, f64::NAN, 0.0]);
+        assert!(Tracks::restore(config, &bad).is_err());
+        // A refused checkpoint still keeps its ids from being given again.
+        let mut fresh = Tracks::new(config).unwrap();
+        fresh.keep_ids_below(bad.next_id);
+        assert_eq!(fresh.next_id, snap.next_id);
+        fresh.keep_ids_below(u32::MAX);
+        assert_eq!(fresh.next_id, snap.next_id);
         // A remembered (deleted) track: finite, coloured within 0–255, its id its own.
         let mut with_lost = snap.clone();
         with_lost.next_id = snap.next_id + 1;
@@ -1163,7 +1225,29 @@ mod tests {
             colour: [0.0, 200.0, 220.0],
             moved: true,
         }];
-        assert!(Tracks::restore(config, &with_lost).is_ok());
+        // What is restored is what was saved, remembered tracks and colours included.
+        let restored = Tracks::restore(config, &with_lost).unwrap();
+        assert_eq!(restored.snapshot(), with_lost);
+        assert!(restored.tracks.iter().all(|t| t.colour.is_some()));
+        let mut bad = with_lost.clone();
+        bad.next_id += 1;
+        bad.lost.push(LostState {
+            id: with_lost.next_id - 1,
+            ..with_lost.lost[0].clone()
+        });
+        assert!(
+            Tracks::restore(config, &bad).is_err(),
+            "a remembered id twice"
+        );
+        let mut bad = with_lost.clone();
+        bad.lost = (0..=most_kept(&config) as u32)
+            .map(|k| LostState {
+                id: with_lost.next_id + k,
+                ..with_lost.lost[0].clone()
+            })
+            .collect();
+        bad.next_id = with_lost.next_id + bad.lost.len() as u32;
+        assert!(Tracks::restore(config, &bad).is_err(), "more than the cap");
         for broken in [
             LostState {
                 position: [f64::NAN, 0.0],
@@ -1171,6 +1255,14 @@ mod tests {
             },
             LostState {
                 colour: [-1.0, 0.0, 0.0],
+                ..with_lost.lost[0].clone()
+            },
+            LostState {
+                velocity: [0.0, f64::INFINITY],
+                ..with_lost.lost[0].clone()
+            },
+            LostState {
+                last_fix_s: f64::NAN,
                 ..with_lost.lost[0].clone()
             },
             LostState {
