@@ -2605,6 +2605,27 @@ mod tests {
         }
     }
 
+    /// The estimator told both UAVs' errors are the simulator's consumer GPS and AHRS
+    /// (`NavErrorModel::consumer_gps`).
+    fn told_consumer_gps(config: &mut EstimatorConfig) {
+        use shared_types::nav_noise::NavErrorModel;
+        let NavErrorModel::GaussMarkov {
+            position_tau_s,
+            position_jitter_m,
+            attitude_tau_s,
+            attitude_jitter_deg,
+        } = NavErrorModel::consumer_gps()
+        else {
+            unreachable!("consumer_gps is a Gauss–Markov model")
+        };
+        for n in [&mut config.noise_left, &mut config.noise_right] {
+            n.position_tau_s = position_tau_s;
+            n.position_jitter_m = position_jitter_m;
+            n.attitude_tau_s = attitude_tau_s;
+            n.attitude_jitter_deg = attitude_jitter_deg;
+        }
+    }
+
     /// Under correlated camera tilts (GPS and attitude Gauss–Markov errors, 250 m up,
     /// 120 m apart, exact rays), Jacobians taken halfway between the prediction and
     /// the iterate (`jacobian_at = "midpoint"`) leave a smaller altitude offset and a
@@ -2624,21 +2645,13 @@ mod tests {
             ..Default::default()
         };
         sc.noise = NavNoise::isotropic(3.0, 2.0);
-        sc.noise.model = NavErrorModel::GaussMarkov {
-            position_tau_s: 120.0,
-            position_jitter_m: 0.3,
-            attitude_tau_s: 10.0,
-            attitude_jitter_deg: 0.2,
-        };
+        sc.noise.model = NavErrorModel::consumer_gps();
         let figures = |at: JacobianAt| {
             let mut config = EstimatorConfig::default();
             config.temporal.jacobian_at = at;
+            told_consumer_gps(&mut config);
             for n in [&mut config.noise_left, &mut config.noise_right] {
                 n.sigma_pixel_px = 0.7;
-                n.position_tau_s = 120.0;
-                n.position_jitter_m = 0.3;
-                n.attitude_tau_s = 10.0;
-                n.attitude_jitter_deg = 0.2;
             }
             let (mut sum, mut n, mut inside) = (0.0, 0usize, 0usize);
             for seed in 0..24 {
@@ -2682,22 +2695,12 @@ mod tests {
             ..Default::default()
         };
         sc.noise = NavNoise::isotropic(3.0, 2.0);
-        sc.noise.model = NavErrorModel::GaussMarkov {
-            position_tau_s: 120.0,
-            position_jitter_m: 0.3,
-            attitude_tau_s: 10.0,
-            attitude_jitter_deg: 0.2,
-        };
+        sc.noise.model = NavErrorModel::consumer_gps();
         let track = |at: JacobianAt, correlated: bool| {
             let mut config = EstimatorConfig::default();
             config.temporal.jacobian_at = at;
             if correlated {
-                for n in [&mut config.noise_left, &mut config.noise_right] {
-                    n.position_tau_s = 120.0;
-                    n.position_jitter_m = 0.3;
-                    n.attitude_tau_s = 10.0;
-                    n.attitude_jitter_deg = 0.2;
-                }
+                told_consumer_gps(&mut config);
             }
             let (run, _) = fly_keyframes(&sc, config, 12.0, 7, Disturbance::default());
             let positions: Vec<[f64; 3]> =
