@@ -2476,21 +2476,7 @@ mod tests {
             ..Default::default()
         };
         let mut config = EstimatorConfig::default();
-        let NavErrorModel::GaussMarkov {
-            position_tau_s,
-            position_jitter_m,
-            attitude_tau_s,
-            attitude_jitter_deg,
-        } = model
-        else {
-            unreachable!("consumer_gps is Gauss–Markov")
-        };
-        for n in [&mut config.noise_left, &mut config.noise_right] {
-            n.position_tau_s = position_tau_s;
-            n.position_jitter_m = position_jitter_m;
-            n.attitude_tau_s = attitude_tau_s;
-            n.attitude_jitter_deg = attitude_jitter_deg;
-        }
+        told_consumer_gps(&mut config);
         // 48 runs: over 24 the share beyond 3σ moved by 0.4 points with the temper
         // (one seed late in its run near 3σ at every temper); over these 48 it is 0.25 %
         // at 1 and 0.61 % at 0.3. χ²(144) at 2.5 % and 97.5 %: 112.7 and 179.1.
