@@ -23,6 +23,7 @@ pub mod configured;
 pub mod consistency;
 pub mod error;
 pub mod evaluation;
+pub mod geolocator;
 pub mod ground_model;
 pub mod hypotheses;
 pub mod iteration;

@@ -31,11 +31,8 @@
 
 use anyhow::{Context, Result};
 use clap::Parser;
-use geolocation::others_message::{add_tracks, detection_identity};
-use geolocation::set_message::{
-    coast_message, estimate_message, is_stale, segment_step, Resume, SegmentStep, CHECKPOINT_KIND,
-};
-use geolocation::target_identity::IdentityCheck;
+use geolocation::geolocator::Geolocator;
+use geolocation::set_message::{is_stale, segment_step, Resume, SegmentStep, CHECKPOINT_KIND};
 use geolocation::tracks::{TrackConfig, Tracks};
 use geolocation::{EstimatorConfig, EstimatorMethod, TemporalEstimator};
 use shared_types::checkpoint;
@@ -145,8 +142,7 @@ fn run() -> Result<()> {
         track_config,
         &mut stats,
     );
-    // Not checkpointed: after a restart the evidence builds up again in a few pairs.
-    let mut identity = IdentityCheck::default();
+    let mut geolocator = Geolocator::new(config, track_config, temporal, tracks);
     let mut saver = StatsSaver::new(&args.service);
     let mut trace = args.service.tracer("geolocation");
     tracing::info!(run = endpoint.run_id(), method = ?config.method, incarnation = args.service.incarnation, "geolocation ready");
@@ -173,56 +169,10 @@ fn run() -> Result<()> {
                 continue;
             }
             if step == SegmentStep::New {
-                if let Some(t) = temporal.as_mut() {
-                    t.reset();
-                }
-                tracks.start_over();
-                identity = IdentityCheck::default();
+                geolocator.start_over();
                 stats.count("segments", 1);
             }
-            // The other vehicles say whether the target's detections are one of them
-            // (`geolocation::target_identity`): then the filter coasts.
-            let check = track_config.enabled && track_config.identity_check;
-            let elsewhere = match (&temporal, check && set.refused == 0) {
-                (Some(filter), true) => {
-                    detection_identity(set, filter, &tracks, &mut identity, &config)
-                }
-                _ => None,
-            };
-            // Right after a gap in the sets (the target hidden), a pair the other
-            // vehicles put in doubt (`target_identity`, "After a gap").
-            identity.arrived(set.t_s);
-            let doubt = check
-                && set.refused == 0
-                && elsewhere.is_none()
-                && identity.reacquiring(set.t_s)
-                && identity.in_doubt();
-            if doubt {
-                stats.count("target_in_doubt", 1);
-            }
-            // A refused set (matching's pair check: two vehicles), one whose
-            // detections are another tracked vehicle's and one in doubt give the
-            // filter's prediction.
-            let coast = set.refused != 0 || elsewhere.is_some() || doubt;
-            if set.refused != 0 {
-                stats.count("sets_refused", 1);
-            }
-            if let Some(id) = elsewhere {
-                stats.count("target_on_track", 1);
-                tracing::debug!(
-                    pair = set.pair_seq,
-                    track = id,
-                    "the target's detections are another vehicle's: coasting"
-                );
-            }
-            let mut msg = if coast {
-                coast_message(set, &config, temporal.as_mut(), &mut stats)
-            } else {
-                estimate_message(set, &config, temporal.as_mut(), &mut stats)
-            };
-            if track_config.enabled {
-                add_tracks(set, &mut msg, &mut tracks, &config, &mut stats, !coast);
-            }
+            let mut msg = geolocator.estimate(set, &mut stats);
             drop(sample);
             let done = monotonic_ns();
             stats.record("compute", elapsed_us(start, done));
@@ -251,8 +201,11 @@ fn run() -> Result<()> {
                     last_pair_seq: msg.pair_seq,
                     last_t_s: msg.t_s,
                     segment: set_segment,
-                    filter: temporal.as_ref().map(TemporalEstimator::snapshot),
-                    tracks: track_config.enabled.then(|| tracks.snapshot()),
+                    filter: geolocator
+                        .temporal
+                        .as_ref()
+                        .map(TemporalEstimator::snapshot),
+                    tracks: track_config.enabled.then(|| geolocator.tracks.snapshot()),
                 };
                 let t0 = monotonic_ns();
                 match checkpoint::write(path, CHECKPOINT_KIND, &state) {

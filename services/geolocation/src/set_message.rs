@@ -225,12 +225,12 @@ fn estimate_unchecked(
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use crate::synthetic::SyntheticScenario;
     use rand::SeedableRng;
 
-    fn set_at(t_s: f64) -> ObservationSetMsg {
+    pub(crate) fn set_at(t_s: f64) -> ObservationSetMsg {
         let mut rng = rand::rngs::StdRng::seed_from_u64(3);
         let trial = SyntheticScenario::default()
             .trial(t_s, 4, &mut rng)

@@ -9,10 +9,11 @@
 //! plain `(header, bytes)` views, [`Intake::on_detection`] per detection and
 //! [`Intake::next_set`] until it returns `None`.
 
-use crate::chain::MatchOutcome;
+use crate::chain::{MatchOutcome, MatchedSet, OthersOutcome};
 use crate::frame::{ChainCounts, FrameInput, FrameMeta, Others};
 use crate::frame_tracking::{FrameTracker, Observed, TrackReport};
 use crate::ring_store::RingStore;
+use crate::set_message::{matched_set, refused_set, SetHeader};
 use crate::{ChainTiming, MatchingConfig, VisionChain};
 use anyhow::Result;
 use detection::frame_view::frame_mat;
@@ -21,9 +22,7 @@ use shared_types::clock::{elapsed_us, monotonic_ns};
 use shared_types::conventions::{Intrinsics, Uav};
 use shared_types::deadline::{Deadlines, Verdict};
 use shared_types::lens::Distortion;
-use shared_types::messages::{
-    DetectionMsg, FrameHeader, ObservationSetMsg, OtherTarget, MAX_OBSERVATIONS, MAX_OTHER_TARGETS,
-};
+use shared_types::messages::{DetectionMsg, FrameHeader, ObservationSetMsg, MAX_OBSERVATIONS};
 use shared_types::stats::StageStats;
 use shared_types::trace::Tracer;
 use std::collections::BTreeMap;
@@ -399,15 +398,13 @@ impl Intake {
                 self.stats.count(name, n);
             }
         }
-        // A set's header (`refused`: 1 for a pair refused as two vehicles).
-        let header = |refused: u32| ObservationSetMsg {
+        let header = SetHeader {
             pair_seq: seq,
             capture_ns: hl.capture_ns.min(hr.capture_ns),
             t_s: hl.t_s,
             rejected_past: rejections.len() as u32,
             segment: hl.segment,
-            refused,
-            ..Default::default()
+            frames: [(hl.seq, hl.t_s), (hr.seq, hr.t_s)],
         };
         let set = match outcome {
             MatchOutcome::NoDetection => {
@@ -425,12 +422,7 @@ impl Intake {
             // cameras are on one vehicle again. Without it a camera that had taken
             // another car kept it, and every later pair was refused (`multi_town`
             // seed 3: 163 pairs, 7 s).
-            MatchOutcome::TargetPairMismatch(current) => {
-                let mut msg = header(1);
-                let frames = [(hl.seq, hl.t_s), (hr.seq, hr.t_s)];
-                fill_entries(&mut msg, current.iter().zip(frames));
-                Some(msg)
-            }
+            MatchOutcome::TargetPairMismatch(current) => Some(refused_set(&header, &current)),
             MatchOutcome::Matched(m) => {
                 let fallbacks = m
                     .past
@@ -443,15 +435,15 @@ impl Intake {
                 if fallbacks > 0 {
                     self.stats.count("essential_fallback", fallbacks as u64);
                 }
-                let mut msg = header(0);
-                self.put_others([&ml, &mr], &m, &mut msg);
-                let frames = [(hl.seq, hl.t_s), (hr.seq, hr.t_s)]
-                    .into_iter()
-                    .chain(m.past.iter().map(|p| (p.seq, p.t_s)));
-                fill_entries(
-                    &mut msg,
-                    m.current.iter().chain(&m.past_observations).zip(frames),
-                );
+                let others = self.others([&ml, &mr], &m);
+                let msg = matched_set(&header, &m, &others);
+                if msg.others_dropped > 0 {
+                    self.stats
+                        .count("others_dropped", u64::from(msg.others_dropped));
+                }
+                if msg.other_count > 0 {
+                    self.stats.count("others", u64::from(msg.other_count));
+                }
                 Some(msg)
             }
         };
@@ -479,15 +471,9 @@ impl Intake {
         set
     }
 
-    /// The other vehicles of the pair into `msg` (counted `others` per pair,
-    /// `others_unpaired`, `others_no_geometry`, `others_dropped` beyond the message's
-    /// room).
-    fn put_others(
-        &mut self,
-        current: [&FrameMeta; 2],
-        matched: &crate::chain::MatchedSet,
-        msg: &mut ObservationSetMsg,
-    ) {
+    /// The other vehicles paired across the pair (counted `others_unpaired`,
+    /// `others_no_geometry`; `others` and `others_dropped` once in the message).
+    fn others(&mut self, current: [&FrameMeta; 2], matched: &MatchedSet) -> OthersOutcome {
         let outcome = self.chain.others(current, matched);
         if outcome.no_geometry {
             self.stats.count("others_no_geometry", 1);
@@ -495,29 +481,7 @@ impl Intake {
         if outcome.unpaired > 0 {
             self.stats.count("others_unpaired", outcome.unpaired as u64);
         }
-        let kept = outcome.targets.len().min(MAX_OTHER_TARGETS);
-        msg.others_dropped = (outcome.targets.len() - kept) as u32;
-        if msg.others_dropped > 0 {
-            self.stats
-                .count("others_dropped", u64::from(msg.others_dropped));
-        }
-        for (slot, t) in msg.others.iter_mut().zip(&outcome.targets) {
-            *slot = OtherTarget {
-                current: t.current,
-                bgr: t.bgr,
-                ..OtherTarget::default()
-            };
-            for (k, p) in t.past.iter().enumerate().take(MAX_OBSERVATIONS - 2) {
-                if let Some(p) = p {
-                    slot.past[k] = *p;
-                    slot.past_valid |= 1 << k;
-                }
-            }
-        }
-        msg.other_count = kept as u32;
-        if kept > 0 {
-            self.stats.count("others", kept as u64);
-        }
+        outcome
     }
 
     /// Saves newly admitted keyframes (called after the sets are published).
@@ -539,25 +503,6 @@ impl Intake {
                 tracing::warn!("keyframes not checkpointed: {e}");
             }
         }
-    }
-}
-
-/// `observations`, each with its frame's (seq, capture time), into `msg`'s entries:
-/// as many as fit, counted.
-fn fill_entries<'a>(
-    msg: &mut ObservationSetMsg,
-    observations: impl Iterator<Item = (&'a geolocation::Observation, (u64, f64))>,
-) {
-    for (slot, (o, (seq, t_s))) in msg
-        .entries
-        .iter_mut()
-        .zip(observations)
-        .take(MAX_OBSERVATIONS)
-    {
-        *slot = o.to_entry();
-        slot.frame_seq = seq;
-        slot.t_s = t_s;
-        msg.count += 1;
     }
 }
 

@@ -25,6 +25,7 @@ pub mod ring;
 pub mod ring_snapshot;
 pub mod ring_store;
 pub mod robust_fit;
+pub mod set_message;
 
 pub use chain::{
     estimate_matched, extract_undistorted, ChainCounts, ChainOutcome, ChainResult, ChainTiming,

@@ -13,7 +13,7 @@
 
 use super::mc_stats::{summarise, EstimateRow, RunRecord, SceneSummary};
 use super::noise::estimator_for;
-use super::stream::{Lane, SceneStream};
+use super::stream::{published, Lane, SceneStream};
 use super::suite::with_protocol;
 use crate::score::look_alike::of_a_look_alike;
 use acquisition::sim::texture::hash;
@@ -42,13 +42,15 @@ pub const WARM_UP_S: f64 = 10.0;
 /// checked across the views and mended or dropped, `matching::chain::target_pair`,
 /// with the detector's candidates given to matching; 16: a measured camera swing moves
 /// the detector's track, `detection::camera_swing`, and a refused pair gives the
-/// filter's prediction).
-const RUN_FORMAT: u32 = 16;
+/// filter's prediction; 17: geolocation by the service's own logic on the set message
+/// matching would publish, `geolocation::geolocator`: the other vehicles' tracks and
+/// their word on the target's detections, `geolocation::target_identity`).
+const RUN_FORMAT: u32 = 17;
 /// The same for what changes only runs under correlated (Gauss–Markov) navigation
 /// errors: 9 = the temporal filter's tilt consider states and keyframe ageing, which
 /// exist only with a correlated-error block (white runs are bit-identical, checked on
-/// `default` seed 1); 10 to 16 with RUN_FORMAT.
-const CORRELATED_FORMAT: u32 = 16;
+/// `default` seed 1); 10 to 17 with RUN_FORMAT.
+const CORRELATED_FORMAT: u32 = 17;
 
 /// The navigation-error models the Monte Carlo runs under.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize, clap::ValueEnum)]
@@ -151,12 +153,9 @@ pub fn run_one(
         };
         let look_alikes = pair.step.look_alikes;
         let counted = t_s >= WARM_UP_S;
-        let estimate = match step.default {
-            Some(Ok(e)) => Some(e),
-            _ => None,
-        };
-        // As in `run`, the estimate gates later pairs' detections.
-        scene.observe_estimate(seq, t_s, estimate.as_ref());
+        // As in `run`, the published estimate gates later pairs' detections.
+        scene.observe_estimate(seq, step.default.as_ref());
+        let estimate = step.default.as_ref().and_then(published);
         if counted {
             if visible {
                 record.visible_after_warm_up += 1;
@@ -165,18 +164,20 @@ pub fn run_one(
                 record.located_not_visible += estimate.is_some() as usize;
             }
         }
-        let Some(e) = estimate else { continue };
+        let Some((e, quality)) = estimate else {
+            continue;
+        };
         let bias = config.bias.at(t_s);
-        let p = e.estimate.position;
-        let c = e.estimate.covariance;
+        let p = e.position;
+        let c = e.covariance;
         record.estimates.push(EstimateRow {
             t_s,
             err: [p.x - target[0], p.y - target[1], p.z - target[2]],
             cov_xy: [c[(0, 0)], c[(0, 1)], c[(1, 1)]],
-            v_acc: e.estimate.altitude_std_error_m,
-            bias_err_deg: [0, 1].map(|i| wrap_angle(e.estimate.yaw_bias[i] - bias[i]).to_degrees()),
+            v_acc: e.altitude_std_error_m,
+            bias_err_deg: [0, 1].map(|i| wrap_angle(e.yaw_bias[i] - bias[i]).to_degrees()),
             visible,
-            quality: e.quality as u8,
+            quality: quality as u8,
             look_alike: of_a_look_alike([p.x, p.y, p.z], target, look_alikes.into_iter().flatten()),
         });
     }

@@ -16,17 +16,22 @@ use detection::camera_swing::CameraView;
 use detection::motion::{MotionConfig, MotionDetector};
 use detection::prediction_gate::{self, GateConfig, RecentPredictions, TargetPrediction};
 use detection::{ColourBlobConfig, TrackCounts, TrackedDetector};
+use geolocation::geolocator::Geolocator;
+use geolocation::tracks::{TrackConfig, Tracks};
 use geolocation::{
-    coast_set, estimate_set, geolocate_filtered_paper, EstimatorConfig, EstimatorError,
-    EstimatorMethod, FilteredEstimate, PastImage, SetEstimate, TemporalEstimator,
+    geolocate_filtered_paper, Estimate, EstimatorConfig, EstimatorError, EstimatorMethod,
+    FilteredEstimate, Quality, TemporalEstimator,
 };
 use matching::epipolar::MatchReject;
+use matching::set_message::{matched_set, refused_set, SetHeader};
 use matching::{ChainCounts, FrameInput, MatchOutcome, MatchingConfig, VisionChain};
 use opencv::core as cv;
 use opencv::prelude::*;
 use shared_types::clock::process_cpu_ns;
 use shared_types::conventions::{Intrinsics, Uav};
 use shared_types::lens::Distortion;
+use shared_types::messages::{EstimateMsg, EstimateStatus};
+use shared_types::stats::StageStats;
 
 /// What every frame of a scene shares.
 #[derive(Debug, Clone, Copy)]
@@ -133,29 +138,12 @@ impl SceneStream {
         Ok(stream)
     }
 
-    /// What the default estimator made of pair `pair_seq` (the frames' `seq`): later
-    /// pairs' detections are gated by it, with the detection service's lag
+    /// What geolocation published for pair `pair_seq` (the frames' `seq`): later
+    /// pairs' detections are gated by it as the detection service gates them
+    /// ([`TargetPrediction::from_estimate`]), with the detection service's lag
     /// ([`prediction_gate::ESTIMATE_LAG_PAIRS`]).
-    pub fn observe_estimate(&mut self, pair_seq: u64, t_s: f64, estimate: Option<&SetEstimate>) {
-        let prediction = estimate.and_then(|e| {
-            let p = TargetPrediction {
-                t_s,
-                position: e.estimate.position.coords.into(),
-                velocity: e.velocity?,
-                horizontal_variance_m2: e.estimate.covariance[(0, 0)]
-                    + e.estimate.covariance[(1, 1)],
-                velocity_std_mps: e
-                    .velocity_std_mps?
-                    .iter()
-                    .map(|v| v * v)
-                    .sum::<f64>()
-                    .sqrt(),
-                yaw_bias: e.estimate.yaw_bias,
-                yaw_bias_variance: [e.estimate.covariance[(2, 2)], e.estimate.covariance[(3, 3)]],
-                coasting: e.quality == geolocation::Quality::Coasting,
-            };
-            p.is_finite().then_some(p)
-        });
+    pub fn observe_estimate(&mut self, pair_seq: u64, estimate: Option<&EstimateMsg>) {
+        let prediction = estimate.and_then(TargetPrediction::from_estimate);
         self.predictions.push(pair_seq, prediction);
     }
 
@@ -263,12 +251,32 @@ impl SceneStream {
     }
 }
 
+/// The estimate a published message holds, as the evaluation scores it, with its
+/// quality; `None` unless its status is `Ok`.
+pub fn published(msg: &EstimateMsg) -> Option<(Estimate, Quality)> {
+    if msg.status != EstimateStatus::Ok as u32 {
+        return None;
+    }
+    let estimate = Estimate {
+        position: nalgebra::Point3::from(msg.position),
+        yaw_bias: msg.yaw_bias_deg.map(f64::to_radians),
+        covariance: nalgebra::Matrix4::from_row_slice(&msg.covariance),
+        altitude_std_error_m: msg.altitude_std_error_m,
+        iterations: msg.iterations as usize,
+        converged: msg.converged != 0,
+        images_used: msg.images_used as usize,
+    };
+    Some((estimate, Quality::from_index(msg.quality)?))
+}
+
 /// What one lane made of one pair.
 pub struct LaneStep {
-    /// `None` when matching gave no set (no detection, not enough history).
-    pub default: Option<Result<SetEstimate, EstimatorError>>,
-    /// `default` is the filter's prediction for a pair matching refused as two
-    /// vehicles (not timed, the paper's method not run).
+    /// What the geolocation service publishes for the pair's set (its status says
+    /// whether it holds an estimate: [`published`]); `None` when matching gave no set
+    /// (no detection, not enough history).
+    pub default: Option<EstimateMsg>,
+    /// The pair was refused as two vehicles: `default` is the filter's prediction (not
+    /// timed, the paper's method not run).
     pub coasted: bool,
     /// The paper's method on the same set, when the lane scores it.
     pub paper: Option<Result<FilteredEstimate, EstimatorError>>,
@@ -282,7 +290,13 @@ pub struct LaneStep {
 pub struct Lane {
     chain: VisionChain,
     pub estimator: EstimatorConfig,
-    temporal: TemporalEstimator,
+    /// The geolocation service's own logic on the set message matching would publish:
+    /// the default estimator, the other vehicles' tracks and their word on the
+    /// target's detections (`geolocation::target_identity`), `[tracks]` as `run`'s
+    /// defaults.
+    geolocator: Geolocator,
+    /// The geolocation service's counters over the lane's pairs.
+    pub stats: StageStats,
     /// Give the chain the true poses (Table 1) instead of the measured ones.
     true_poses: bool,
     /// Also run the paper's method on each matched set (not timed).
@@ -296,9 +310,17 @@ impl Lane {
         true_poses: bool,
         score_paper: bool,
     ) -> Result<Self> {
+        let config = Self::temporal_config(&estimator);
+        let tracks = TrackConfig::default();
         Ok(Self {
             chain: VisionChain::new(matching.clone(), estimator)?,
-            temporal: TemporalEstimator::new(Self::temporal_config(&estimator))?,
+            geolocator: Geolocator::new(
+                config,
+                tracks,
+                Some(TemporalEstimator::new(config)?),
+                Tracks::new(tracks).map_err(anyhow::Error::msg)?,
+            ),
+            stats: StageStats::new("geolocation"),
             estimator,
             true_poses,
             score_paper,
@@ -352,27 +374,21 @@ impl Lane {
             &mut timing,
             &mut rejections,
         )?;
+        let f = &pair.step.frames;
+        let header = SetHeader {
+            pair_seq: f[0].seq,
+            capture_ns: 0,
+            t_s: f[0].t_s,
+            rejected_past: rejections.len() as u32,
+            segment: 0,
+            frames: [(f[0].seq, f[0].t_s), (f[1].seq, f[1].t_s)],
+        };
         let mut cpu_us = 0.0;
         let (mut default, mut paper) = (None, None);
         if let MatchOutcome::Matched(set) = &outcome {
-            let past: Vec<PastImage> = set
-                .past
-                .iter()
-                .zip(&set.past_observations)
-                .map(|(m, o)| PastImage {
-                    id: (m.uav, m.seq),
-                    t_s: m.t_s,
-                    observation: *o,
-                })
-                .collect();
-            let current = [&set.current[0], &set.current[1]];
-            default = Some(estimate_set(
-                pair.step.frames[0].t_s,
-                current,
-                &past,
-                &Self::temporal_config(&self.estimator),
-                Some(&mut self.temporal),
-            ));
+            let others = self.chain.others([&metas[0], &metas[1]], set);
+            let msg = matched_set(&header, set, &others);
+            default = Some(self.geolocator.estimate(&msg, &mut self.stats));
             // What the pipeline spends ends here; the paper's method is scored on the
             // same set but not timed.
             cpu_us = process_cpu_ns().saturating_sub(started) as f64 / 1e3;
@@ -385,16 +401,13 @@ impl Lane {
                 ));
             }
         }
-        // A pair refused as two vehicles gives the filter's prediction, as the
-        // geolocation service publishes it for a refused set: its coasting gate
-        // brings the detectors back to one vehicle.
+        // A pair refused as two vehicles: the geolocation service publishes the
+        // filter's prediction for it, whose coasting gate brings the detectors back to
+        // one vehicle.
         let coasted = matches!(outcome, MatchOutcome::TargetPairMismatch(_));
         if let MatchOutcome::TargetPairMismatch(current) = &outcome {
-            default = coast_set(
-                pair.step.frames[0].t_s,
-                [&current[0], &current[1]],
-                &mut self.temporal,
-            );
+            let msg = refused_set(&header, current);
+            default = Some(self.geolocator.estimate(&msg, &mut self.stats));
         }
         self.chain.admit([&metas[0], &metas[1]], &mut observed)?;
         Ok(LaneStep {

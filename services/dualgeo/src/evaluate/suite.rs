@@ -12,7 +12,7 @@
 //! feeds truth to the chain: truth only scores.
 
 use super::noise::{estimator_for, Calibration, MethodErrors};
-use super::stream::{Lane, SceneStream};
+use super::stream::{published, Lane, SceneStream};
 use acquisition::sim::{Presets, SimConfig};
 use anyhow::{Context, Result};
 use matching::{ChainCounts, MatchingConfig};
@@ -121,10 +121,10 @@ pub fn run_scene(
     let mut results = [ProtocolResult::default(), ProtocolResult::default()];
     // The Table 2 lane's estimate (the default estimator on measured poses) gates the
     // detections of later pairs, as in `run`; handed over before the next pair.
-    let mut feedback: Option<(u64, f64, Option<geolocation::SetEstimate>)> = None;
+    let mut feedback: Option<(u64, Option<shared_types::messages::EstimateMsg>)> = None;
     loop {
-        if let Some((seq, t_s, estimate)) = feedback.take() {
-            scene.observe_estimate(seq, t_s, estimate.as_ref());
+        if let Some((seq, estimate)) = feedback.take() {
+            scene.observe_estimate(seq, estimate.as_ref());
         }
         let Some(pair) = scene.next_pair()? else {
             break;
@@ -135,15 +135,7 @@ pub fn run_scene(
             .collect::<Result<Vec<_>>>()?;
         progress.inc(1);
         let t_s = pair.step.frames[0].t_s;
-        feedback = Some((
-            pair.step.frames[0].seq,
-            t_s,
-            steps[1]
-                .default
-                .as_ref()
-                .and_then(|r| r.as_ref().ok())
-                .cloned(),
-        ));
+        feedback = Some((pair.step.frames[0].seq, steps[1].default));
         if t_s < SUITE_WARM_UP_S {
             continue;
         }
@@ -159,7 +151,8 @@ pub fn run_scene(
             } else {
                 config.bias.at(t_s)
             };
-            let located = matches!(&lane.default, Some(Ok(_)));
+            let estimate = lane.default.as_ref().and_then(published);
+            let located = estimate.is_some();
             if pair.visible {
                 r.visible += 1;
                 r.located += located as usize;
@@ -167,19 +160,16 @@ pub fn run_scene(
                 r.not_visible += 1;
                 r.located_not_visible += located as usize;
             }
-            if let Some(default) = lane.default {
+            if lane.default.is_some() {
                 // A refused pair's prediction is an estimate as `run` publishes it,
                 // but no set was estimated: not timed, nothing for the paper's method.
                 if !lane.coasted {
                     r.cpu_us.push(lane.cpu_us);
                 }
-                if let Ok(e) = default {
-                    r.default.push(
-                        e.estimate.position,
-                        target,
-                        Some((e.estimate.yaw_bias, bias_truth)),
-                    );
-                    r.calibration.push(&e.estimate, target);
+                if let Some((e, _)) = &estimate {
+                    r.default
+                        .push(e.position, target, Some((e.yaw_bias, bias_truth)));
+                    r.calibration.push(e, target);
                 }
                 match lane.paper {
                     Some(Ok(f)) => r.paper.push(
