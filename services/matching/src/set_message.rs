@@ -161,20 +161,26 @@ mod tests {
         }
     }
 
-    #[test]
-    fn a_matched_set_carries_every_image_and_the_other_vehicles() {
-        let matched = MatchedSet {
+    /// A set of the current pair and `past`, each past image with its observation.
+    fn matched(past: Vec<(Observation, PastMatch)>) -> MatchedSet {
+        let (past_observations, past) = past.into_iter().unzip();
+        MatchedSet {
             current: [
                 observation(Uav::Left, 300.0),
                 observation(Uav::Right, 310.0),
             ],
-            past_observations: vec![
-                observation(Uav::Left, 200.0),
-                observation(Uav::Right, 210.0),
-            ],
-            past: vec![past(Uav::Left, 3), past(Uav::Right, 4)],
+            past_observations,
+            past,
             mended: None,
-        };
+        }
+    }
+
+    #[test]
+    fn a_matched_set_carries_every_image_and_the_other_vehicles() {
+        let matched = matched(vec![
+            (observation(Uav::Left, 200.0), past(Uav::Left, 3)),
+            (observation(Uav::Right, 210.0), past(Uav::Right, 4)),
+        ]);
         let others = OthersOutcome {
             targets: vec![OtherPixels {
                 current: [[1.0, 2.0], [3.0, 4.0]],
@@ -201,15 +207,7 @@ mod tests {
 
     #[test]
     fn others_beyond_the_room_are_counted_dropped() {
-        let matched = MatchedSet {
-            current: [
-                observation(Uav::Left, 300.0),
-                observation(Uav::Right, 310.0),
-            ],
-            past_observations: Vec::new(),
-            past: Vec::new(),
-            mended: None,
-        };
+        let matched = matched(Vec::new());
         let others = OthersOutcome {
             targets: vec![
                 OtherPixels {
