@@ -31,7 +31,7 @@ fn a_live_flight_over_udp_loses_no_telemetry_and_survives_stalls() {
     let dir = Scratch::new("live-flight");
     let recorded = dir.join("recorded");
     let dualgeo = std::path::Path::new(env!("CARGO_BIN_EXE_dualgeo"));
-    record_flight(dualgeo, "default", 16, &recorded);
+    record_flight(dualgeo, "default", None, 16, &recorded);
     let ports = LivePorts::pick();
     let live = dir.join("live.toml");
     write_live_toml(&recorded, &live, ports);

@@ -21,6 +21,16 @@ fn json(path: &std::path::Path) -> Value {
     serde_json::from_str(&std::fs::read_to_string(path).expect("read json")).expect("json")
 }
 
+/// The flight's frame rate: half the preset's. Two `ffmpeg` re-encoders stand in for
+/// the UAVs' own encoders on the same two cores as the pipeline; at 30 FPS the
+/// machine was saturated and the estimates made in 11 s varied 11–103 from run to run
+/// with the machine's speed (measured on this commit's parent and on 43e5ac5 alike).
+/// This test is about the gimbal's attitude on the live link; throughput is the
+/// `live_flight` benchmark's.
+const FRAME_RATE_HZ: f64 = 15.0;
+/// Seconds of the 16 s flight played (a third of it is the matching rings' warm-up).
+const SEND_S: f64 = 15.0;
+
 #[test]
 fn a_live_gimbal_flight_gives_each_frame_the_camera_on_its_gimbal() {
     if !have_ffmpeg() {
@@ -30,7 +40,7 @@ fn a_live_gimbal_flight_gives_each_frame_the_camera_on_its_gimbal() {
     let dir = Scratch::new("live-gimbal");
     let recorded = dir.join("recorded");
     let dualgeo = std::path::Path::new(env!("CARGO_BIN_EXE_dualgeo"));
-    record_flight(dualgeo, "gimbal", 12, &recorded);
+    record_flight(dualgeo, "gimbal", Some(FRAME_RATE_HZ), 16, &recorded);
     let ports = LivePorts::pick();
     let live = dir.join("live.toml");
     write_live_toml(&recorded, &live, ports);
@@ -38,7 +48,7 @@ fn a_live_gimbal_flight_gives_each_frame_the_camera_on_its_gimbal() {
     let out = dir.join("out");
     let run = start_run(dualgeo, &live, &out, ports);
     let sender = LiveSender::start(&recorded, ports);
-    std::thread::sleep(Duration::from_secs(11));
+    std::thread::sleep(Duration::from_secs_f64(SEND_S));
     let sent: u64 = sender.stop().iter().sum();
     let (clean, log) = stop_run(run);
     assert!(clean, "{log}");
@@ -46,15 +56,20 @@ fn a_live_gimbal_flight_gives_each_frame_the_camera_on_its_gimbal() {
     let c = json(&out.join("counters.json"));
     let n = |k: &str| c[format!("acquisition.source.{k}")].as_u64().unwrap_or(0);
     eprintln!("sent {sent}; acquisition's counters: {c}");
-    // ~11 s, two UAVs, three message types at 50 Hz.
-    assert!(sent > 2 * 3 * 400, "only {sent} messages sent");
+    // ~15 s, two UAVs, three message types at 50 Hz.
+    assert!(sent > 2 * 3 * 600, "only {sent} messages sent");
     assert_eq!(
         n("telemetry_messages"),
         sent,
         "every message sent was received\n{log}"
     );
     let frames = n("video_frames");
-    assert!(frames > 2 * 250, "{frames} frames decoded\n{c}");
+    // Three quarters of what was sent.
+    let expected = 2.0 * SEND_S * FRAME_RATE_HZ;
+    assert!(
+        frames as f64 > 0.75 * expected,
+        "{frames} of ~{expected} frames decoded\n{c}"
+    );
     // A frame before the first gimbal message has no camera pose; after it, all do.
     assert!(
         n("no_pose_gimbal") * 20 < frames,

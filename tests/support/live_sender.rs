@@ -79,10 +79,41 @@ pub fn write_live_toml(recorded: &Path, out: &Path, ports: LivePorts) {
     std::fs::write(out, toml::to_string(&meta).expect("TOML")).expect("write live flight.toml");
 }
 
-/// Records `seconds` of `preset` as a flight (`dualgeo simulate --flight-out OUT`).
-pub fn record_flight(dualgeo: &Path, preset: &str, seconds: u32, out: &Path) {
-    let o = Command::new(dualgeo)
-        .args(["simulate", "--preset", preset, "--duration-s"])
+/// Records `seconds` of `preset` as a flight (`dualgeo simulate --flight-out OUT`), at
+/// `frame_rate_hz` instead of the preset's when given (a preset of that rate on top of
+/// it, in a presets file beside OUT).
+pub fn record_flight(
+    dualgeo: &Path,
+    preset: &str,
+    frame_rate_hz: Option<f64>,
+    seconds: u32,
+    out: &Path,
+) {
+    let mut simulate = Command::new(dualgeo);
+    simulate.arg("simulate");
+    match frame_rate_hz {
+        None => simulate.args(["--preset", preset]),
+        Some(hz) => {
+            let presets = out.with_extension("presets.toml");
+            if let Some(dir) = presets.parent() {
+                std::fs::create_dir_all(dir).expect("create the flight's folder");
+            }
+            let built_in = include_str!("../../services/acquisition/presets/scenarios.toml");
+            std::fs::write(
+                &presets,
+                format!(
+                    "{built_in}\n[{preset}_at_rate]\nbase = \"{preset}\"\nframe_rate_hz = {hz:?}\n"
+                ),
+            )
+            .expect("write the presets file");
+            simulate
+                .arg("--presets")
+                .arg(&presets)
+                .args(["--preset", &format!("{preset}_at_rate")])
+        }
+    };
+    let o = simulate
+        .arg("--duration-s")
         .arg(seconds.to_string())
         .arg("--flight-out")
         .arg(out)
