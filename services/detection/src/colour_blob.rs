@@ -104,6 +104,8 @@ pub struct ColourBlobDetector {
     /// The other blobs of the target's colour where the hint was taken
     /// (`constellation.rs`), the frame's pixels.
     landmarks: Vec<[f64; 2]>,
+    /// See [`Self::set_vanished`].
+    vanished: Vec<[f64; 2]>,
     /// Width of the frame being detected, px.
     frame_width: f64,
     /// The next detection looks at the whole frame (no window first).
@@ -158,6 +160,7 @@ impl ColourBlobDetector {
             blobs: Vec::with_capacity(16),
             centres: Vec::with_capacity(16),
             landmarks: Vec::with_capacity(MAX_LANDMARKS),
+            vanished: Vec::new(),
             frame_width: 0.0,
             whole_next: false,
             last_whole: false,
@@ -194,6 +197,14 @@ impl ColourBlobDetector {
         self.landmarks.clear();
         self.landmarks
             .extend(landmarks.iter().take(MAX_LANDMARKS).copied());
+    }
+
+    /// Where look-alikes that vanished near the target were last seen (the tracked
+    /// detector's memory, `tracked.rs`): a blob there is that look-alike coming back,
+    /// not the target.
+    pub fn set_vanished(&mut self, vanished: &[[f64; 2]]) {
+        self.vanished.clear();
+        self.vanished.extend_from_slice(vanished);
     }
 
     /// Whether a lone blob of the target's colour far from a fresh hint may be taken
@@ -320,13 +331,16 @@ impl ColourBlobDetector {
                 self.centres.clear();
                 self.centres.extend(self.blobs.iter().map(|b| b.centre));
                 let tolerance = constellation::alignment_tolerance_px(self.frame_width, near.age_s);
-                let blobs = &self.blobs;
+                let (blobs, centres, vanished) = (&self.blobs, &self.centres, &self.vanished);
                 let picked = constellation::pick(
                     near.centre,
                     near.radius,
                     &self.landmarks,
-                    &self.centres,
-                    |k| blobs[k].in_gate,
+                    centres,
+                    |k| {
+                        blobs[k].in_gate
+                            && !constellation::is_a_landmark(centres[k], near.centre, vanished)
+                    },
                     tolerance,
                 );
                 // A window answers only when no blob outside it could do better: every
@@ -356,6 +370,7 @@ impl ColourBlobDetector {
             let known = |b: &&Blob| {
                 near.is_some_and(|n| {
                     constellation::is_a_landmark(b.centre, n.centre, &self.landmarks)
+                        || constellation::is_a_landmark(b.centre, n.centre, &self.vanished)
                 })
             };
             return Ok(lone.filter(|b| !known(b)).map(|b| (b.label, b.area)));

@@ -401,7 +401,7 @@ mod tests {
     #[test]
     fn the_traffic_scenes_look_alike_is_not_estimated() {
         let base = Presets::builtin().get("suite_traffic").unwrap();
-        let seeds = [1, 2, 3, 5];
+        let seeds = [1, 2, 3, 4, 5];
         let runs: Vec<RunRecord> = std::thread::scope(|s| {
             let handles: Vec<_> = seeds
                 .iter()
@@ -439,18 +439,16 @@ mod tests {
             // look-alike from its first estimate: 17 estimates (4.57–6.03 s), where the
             // 3 × 3 grid's first four were nearer the target. The grid cut every other
             // scene's start errors (docs/temporal.md, "A finer start grid").
-            // Seed 5: since the lane runs the geolocation service's own logic (run
-            // format 17: the set message's degrees round trip moves every estimate by
-            // ~1e-9 m), the filter, coasting as both red cars leave the bridge,
-            // re-acquires at 16.97 s instead of 16.83 s, by when the coasting gate has
-            // the detectors on the look-alike: 45 estimates of it (16.97–19.9 s).
-            // `dualgeo run`, every pair, estimates it on none (multi-target-seeds.md).
+            // Seeds 4 and 5: the look-alike went under the bridge before the target and
+            // came out first, where it went in, within the track's radius of the
+            // target's last pixel; the detector took it and the filter followed it (76
+            // and 45 estimates of it). It is now remembered where it vanished
+            // (`detection::tracked`, `vanished`): none.
             // Known regressions (docs/monte-carlo.md), allowed at their measured size
             // so that a worse one still fails here.
             let allowed = match *seed {
                 2 => 4,
                 3 => 17,
-                5 => 45,
                 _ => 0,
             };
             assert!(
