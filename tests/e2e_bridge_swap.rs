@@ -13,7 +13,10 @@
 //! - Seed 4: the same, with one other vehicle in view, whose track had widened while
 //!   nothing was seen: the evidence built slower than the filter walked onto the
 //!   look-alike (62 %). Right after such a gap a pair in doubt is coasted too
-//!   (`target_in_doubt`).
+//!   (`target_in_doubt`). Since the detector remembers a look-alike that vanished
+//!   beside the target (`detection::tracked`), it no longer takes it when it comes
+//!   out first, and geolocation's doubt is not reached here (unit-tested in
+//!   `geolocation::target_identity`): the seed is held to its located share.
 //! - Seed 2: the two cameras took different cars; every pair was refused as two
 //!   vehicles and, with no estimate, no gate brought them back: 73 %. A refused pair
 //!   now gives the filter's prediction (`sets_refused`), whose gate does.
@@ -33,9 +36,9 @@ fn the_targets_estimate_stays_on_the_target_after_the_bridge() {
     let flown = fly(&dir, "suite_traffic", 5, 20.0);
     // (seed, counter that shows the mechanism at work, located before it).
     for (seed, counter, before) in [
-        (2, "geolocation.sets_refused", 0.73),
-        (4, "geolocation.target_in_doubt", 0.62),
-        (5, "geolocation.target_on_track", 0.49),
+        (2, Some("geolocation.sets_refused"), 0.73),
+        (4, None, 0.62),
+        (5, Some("geolocation.target_on_track"), 0.49),
     ] {
         let name = format!("suite_traffic-{seed:03}");
         let located = flown.target_located(&name);
@@ -43,9 +46,11 @@ fn the_targets_estimate_stays_on_the_target_after_the_bridge() {
             located >= 0.9,
             "seed {seed}: target located in {located} of its pairs ({before} before)"
         );
-        let counters = flown.counters(&name);
-        let n = counters[counter].as_u64().unwrap_or(0);
-        assert!(n > 0, "seed {seed}: no {counter}: {counters}");
+        if let Some(counter) = counter {
+            let counters = flown.counters(&name);
+            let n = counters[counter].as_u64().unwrap_or(0);
+            assert!(n > 0, "seed {seed}: no {counter}: {counters}");
+        }
     }
     // Issue #23's target: the look-alike is never the target's estimate, on any seed
     // (`dualgeo run`, 2026-11-28: none on seeds 1–8 of the 24 s flights).
