@@ -628,6 +628,7 @@ pub(crate) mod tests {
         let gate = Some(Gate {
             centre: [100.0, 100.0],
             radius_px: 40.0,
+            sigma_px: 10.8,
             prefer_centre: false,
         });
         let run = |list: bool| {
@@ -779,6 +780,7 @@ pub(crate) mod tests {
         d.set_gate(Some(Gate {
             centre: [40.0, 40.0],
             radius_px: 30.0,
+            sigma_px: 8.1,
             prefer_centre: false,
         }));
         assert!(d
@@ -788,6 +790,7 @@ pub(crate) mod tests {
         d.set_gate(Some(Gate {
             centre: [140.0, 40.0],
             radius_px: 30.0,
+            sigma_px: 8.1,
             prefer_centre: false,
         }));
         assert!(d

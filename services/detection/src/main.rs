@@ -16,6 +16,8 @@
 //! (detections after a camera found nothing in its gates for `reacquire_after_s`),
 //! `swings_followed` (frames whose measured camera swing beyond its attitude noise
 //! moved the track's hint, `detection::camera_swing`),
+//! `track_kept` (frames where a coasting filter's gate favoured another blob too
+//! little to leave the image track's, `detection::tracked::KEEP_TRACK`),
 //! `gated_frames` (frames detected with a gate), `frames_late` (started after the
 //! frame's deadline, one frame period after its moment: `shared_types::deadline`) and
 //! `frames_shed` (late with a newer frame of the same UAV waiting: skipped, no message),
@@ -292,6 +294,7 @@ impl Detecting {
                 stats.count("gated_out", counts.gated_out);
                 stats.count("reacquired", counts.reacquired);
                 stats.count("swings_followed", counts.swings_followed);
+                stats.count("track_kept", counts.track_kept);
             }
             Chosen::Learned(d) => {
                 let counts = d.take_counts();

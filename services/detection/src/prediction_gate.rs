@@ -149,8 +149,11 @@ impl GateConfig {
 pub struct Gate {
     pub centre: [f64; 2],
     pub radius_px: f64,
-    /// From a coasting filter: the blob nearest `centre` is the target, whatever the
-    /// image track says.
+    /// 1σ of the predicted pixel (the radius is `sigmas` of it plus the margin).
+    pub sigma_px: f64,
+    /// From a coasting filter: the blob nearest `centre` is the target rather than the
+    /// image track's, unless the prediction hardly tells them apart
+    /// (`tracked::KEEP_TRACK`).
     pub prefer_centre: bool,
 }
 
@@ -220,6 +223,7 @@ pub fn gate_for(
     (finite && radius_px <= config.max_radius_frac * frame.width as f64).then_some(Gate {
         centre,
         radius_px,
+        sigma_px,
         prefer_centre: prediction.coasting,
     })
 }

@@ -34,7 +34,27 @@ pub struct TrackCounts {
     /// Frames whose camera had swung beyond its attitude noise since the target was
     /// last seen: the hint and its landmarks moved with the swing.
     pub swings_followed: u64,
+    /// Frames where a coasting filter's gate held the track's blob and another one
+    /// nearer its predicted pixel, too little nearer to leave the track for
+    /// ([`KEEP_TRACK`]): the track's blob was kept.
+    pub track_kept: u64,
 }
+
+/// Odds (as a log likelihood ratio) by which a coasting filter's prediction must favour
+/// another blob of its gate over the image track's before the track is left for it:
+/// e to 1, the gate's Gaussian over the predicted pixel
+/// (`(d_track² − d_other²) / 2σ² ≥ 1`). The coasting gate is there for tracks that
+/// followed a look-alike while the filter coasted on the hidden target
+/// (`prediction_gate::TargetPrediction::coasting`); but a filter coasts too when its
+/// own prediction wandered (a GPS error that drifts): `suite_traffic` seed 4 under
+/// correlated errors, both cameras on the target and the prediction 10 m off, midway
+/// to a look-alike 100 px from it (47 and 55 px from the predicted pixel, σ ≈ 36 px,
+/// a log ratio of 0.3). Taking the nearer blob put the left camera on the look-alike
+/// for the rest of the run (two vehicles: every pair refused, the filter coasting for
+/// 10 s, 90 m off). A target reappearing near the prediction with the track's
+/// look-alike 60 px behind it (the unit test below: 5 and 65 px, σ 27 px) is a log
+/// ratio of 2.9.
+pub const KEEP_TRACK: f64 = 1.0;
 
 pub struct TrackedDetector {
     detector: ColourBlobDetector,
@@ -228,6 +248,14 @@ impl TrackedDetector {
                 self.detector.set_landmarks(&[]);
                 found = self.detector.detect_near(frame, hint);
             }
+            if let (Some(g), Some(h), Ok(Some(picked))) = (gate, own, &found) {
+                let width = cv::MatTraitConst::cols(frame);
+                let (detector, counts) = (&self.detector, &mut self.counts);
+                if Self::track_outweighs(detector, counts, g, h, picked.centre, width) {
+                    self.detector.set_landmarks(landmarks);
+                    found = self.detector.detect_near(frame, own);
+                }
+            }
             found
         };
         self.detector.set_gate(None);
@@ -345,6 +373,38 @@ impl TrackedDetector {
         }
     }
 
+    /// Whether the image track's blob should stand against `picked`, the blob nearest
+    /// a coasting gate's centre (see [`KEEP_TRACK`]): the track is fresh and inside
+    /// the gate, its blob (the one nearest its last pixel, within the distance the
+    /// view and the car can move since) was looked at, and the gate favours `picked`
+    /// over it by less than `KEEP_TRACK`. Counted `track_kept`.
+    fn track_outweighs(
+        detector: &ColourBlobDetector,
+        counts: &mut TrackCounts,
+        gate: Gate,
+        own: TrackHint,
+        picked: [f64; 2],
+        width: i32,
+    ) -> bool {
+        if !gate.prefer_centre || !own.fresh || !gate.contains(own.centre) || gate.sigma_px <= 0.0 {
+            return false;
+        }
+        let d = |a: [f64; 2], b: [f64; 2]| (a[0] - b[0]).hypot(a[1] - b[1]);
+        let tolerance = crate::constellation::follow_tolerance_px(width as f64, own.age_s);
+        let track_blob = detector
+            .looked_at()
+            .filter(|b| gate.contains(*b) && d(*b, own.centre) <= tolerance)
+            .min_by(|a, b| d(*a, own.centre).total_cmp(&d(*b, own.centre)));
+        let Some(blob) = track_blob.filter(|b| d(*b, picked) > 0.5) else {
+            return false;
+        };
+        let log_odds = (d(blob, gate.centre).powi(2) - d(picked, gate.centre).powi(2))
+            / (2.0 * gate.sigma_px.powi(2));
+        let keep = log_odds < KEEP_TRACK;
+        counts.track_kept += keep as u64;
+        keep
+    }
+
     /// Every blob of the target's colour in the frame just detected (several targets;
     /// see [`ColourBlobDetector::all_blobs`]).
     pub fn candidates(
@@ -458,6 +518,7 @@ mod tests {
             let gate = Gate {
                 centre: [305.0, 200.0],
                 radius_px: 100.0,
+                sigma_px: 27.0,
                 prefer_centre,
             };
             d.detect_gated(
@@ -472,6 +533,43 @@ mod tests {
         };
         assert_eq!(run(false), Some(370.0), "the track's pick inside the gate");
         assert_eq!(run(true), Some(310.0), "nearest the coasting prediction");
+    }
+
+    /// A coasting filter whose own prediction wandered (a drifting GPS error) puts its
+    /// predicted pixel midway between the target the track follows and a look-alike
+    /// beside it (`KEEP_TRACK`): 22 and 18 px from them, σ 27 px, a log likelihood
+    /// ratio of 0.1. The track's blob is kept (counted); the same gate with the track's
+    /// blob 60 px further off is left for the nearer one.
+    #[test]
+    fn a_coasting_gate_that_hardly_tells_two_blobs_apart_keeps_the_track() {
+        let dt = 1.0 / 30.0;
+        let run = |other_x: i32, centre_x: f64| {
+            let mut d = TrackedDetector::new(ColourBlobConfig::default()).unwrap();
+            for k in 0..10 {
+                d.detect(0, k as f64 * dt, &street(&[(360 + k, 200)]))
+                    .unwrap()
+                    .unwrap();
+            }
+            let gate = Gate {
+                centre: [centre_x, 200.0],
+                radius_px: 100.0,
+                sigma_px: 27.0,
+                prefer_centre: true,
+            };
+            let found = d
+                .detect_gated(
+                    0,
+                    10.0 * dt,
+                    &street(&[(370, 200), (other_x, 200)]),
+                    Some(gate),
+                    None,
+                )
+                .unwrap()
+                .map(|f| f.centre[0]);
+            (found, d.take_counts().track_kept)
+        };
+        assert_eq!(run(330, 348.0), (Some(370.0), 1), "the track's blob kept");
+        assert_eq!(run(290, 288.0), (Some(290.0), 0), "nearest the prediction");
     }
 
     /// The camera pitches 16° between two frames (a route corner, `multi_town` seed 3):

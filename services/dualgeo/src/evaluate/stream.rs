@@ -235,6 +235,7 @@ impl SceneStream {
             total.gated_out += c.gated_out;
             total.reacquired += c.reacquired;
             total.swings_followed += c.swings_followed;
+            total.track_kept += c.track_kept;
             total.partial_view_dropped += c.partial_view_dropped;
         }
         let visible = [Uav::Left, Uav::Right]
