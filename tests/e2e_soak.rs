@@ -1,7 +1,7 @@
 //! Issue #13's CI soak: a looped recording for 60 s with the soak report sampled every
 //! 5 s. The report is written as the run goes (soak.csv, track.csv readable while it
 //! runs), every process is sampled, no descriptor leaks after the warm-up, and memory's
-//! floor rises by at most 2 % over the 40 s after it (the 1 % target is for the 1 h soak
+//! floor rises by at most 2 % or 1.5 MiB over the 40 s after it (the 1 % target is for the 1 h soak
 //! in docs/reliability.md: 40 s cannot show a slow leak, a fast one it can).
 
 #[path = "support/chaos.rs"]
@@ -12,6 +12,11 @@ mod scratch;
 use scratch::Scratch;
 use std::process::{Command, Stdio};
 use std::time::Duration;
+
+/// How far a process's memory floor may rise from 30 s to the end, at least (KiB).
+const FLOOR_SLACK_KIB: f64 = 1536.0;
+/// How far any sample may be above the first floor, at least (KiB).
+const PEAK_SLACK_KIB: f64 = 2048.0;
 
 #[test]
 fn a_sixty_second_soak_reports_flat_memory_and_streams_its_outputs() {
@@ -82,25 +87,34 @@ fn a_sixty_second_soak_reports_flat_memory_and_streams_its_outputs() {
         if name.starts_with("rss_kib_") {
             assert!(values.iter().all(|v| *v > 1000.0), "{name}: {values:?}");
             // A leak raises the floor; a sample taken while a process holds a transient
-            // working set (most likely one update's matrices, a few hundred KiB, given
-            // back after it: RSS falls again) only rises above it.
-            // Measured: geolocation at 9 040–9 300 KiB, back to 9 040 between, failed
-            // a test against the first sample at 2 %. So the floor of the last three
-            // samples is held to the floor of the first three, and no sample may be
-            // more than 10 % above it.
+            // working set only rises above it. The floor of the last three samples is
+            // held to the floor of the first three, and no sample may be far above it.
+            //
+            // How far is measured, not chosen: geolocation is a single-threaded 10 MB
+            // process with a 3-4 MB heap, and glibc keeps freed heap resident until the
+            // top of the heap is free, so its RSS wanders and comes back. In a 10 min
+            // run (default preset, 10 s passes looped, sampled every 10 s) its VmRSS
+            // ranged 9 716-10 632 KiB with no trend (elevated by 916 KiB for 60 s, then
+            // back to 9 800); sampled every second, it stepped 9 336 -> 10 392 KiB
+            // between 25 and 37 s; a CI run failed at 2 % with 10 340 then 10 700 KiB.
+            // So the allowance is 2 % (10 %) or a fixed 1.5 MiB (2 MiB) for the floor
+            // (the peak), whichever is larger. The fixed part only matters for the
+            // processes under ~75 MB (20 MB); a leak of more than ~60 KiB/s in any of
+            // them still fails here, and the hour in docs/reliability.md is the test
+            // of a slow one.
             eprintln!("{name}: {values:?}");
             assert!(values.len() >= 5, "{name}: {values:?}");
             let floor = |v: &[f64]| v.iter().copied().fold(f64::INFINITY, f64::min);
             let (head, tail) = (floor(&values[..3]), floor(&values[values.len() - 3..]));
-            let rise = (tail - head) / head;
+            let rise = tail - head;
             assert!(
-                rise <= 0.02,
-                "{name}: floor rose {:.1} %: {values:?}",
-                rise * 100.0
+                rise <= (0.02 * head).max(FLOOR_SLACK_KIB),
+                "{name}: floor rose {rise:.0} KiB ({:.1} %): {values:?}",
+                rise / head * 100.0
             );
             let peak = values.iter().copied().fold(0.0, f64::max);
             assert!(
-                peak <= 1.10 * head,
+                peak - head <= (0.10 * head).max(PEAK_SLACK_KIB),
                 "{name}: peak {:.1} % above the floor: {values:?}",
                 (peak / head - 1.0) * 100.0
             );
