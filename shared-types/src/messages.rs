@@ -248,11 +248,27 @@ impl OtherTarget {
     }
 }
 
+/// The white noise of one UAV's pose samples, as matching measures it over the frames
+/// it is given (`geolocation::telemetry_noise`): the σ of each sample's distance from
+/// the chord through its neighbours. `chords` 0: not measured (yet).
+#[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
+#[repr(C)]
+#[type_name("dualgeo::PoseNoise/v1")]
+pub struct PoseNoise {
+    /// σ̂ of x, y, z (m) and yaw, pitch, roll (degrees).
+    pub sigma: [f64; 6],
+    /// The chords' mean time step, seconds.
+    pub mean_step_s: f64,
+    /// Chords it is measured over.
+    pub chords: u32,
+    pub _reserved: u32,
+}
+
 /// Matching's output for one stereo pair: `entries[0]` is the current left image,
 /// `entries[1]` the current right one, then `count − 2` past images.
 #[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
 #[repr(C)]
-#[type_name("dualgeo::ObservationSetMsg/v7")]
+#[type_name("dualgeo::ObservationSetMsg/v8")]
 pub struct ObservationSetMsg {
     /// Index of this set among the sets matching published (gaps = sets lost).
     pub set_seq: u64,
@@ -276,6 +292,8 @@ pub struct ObservationSetMsg {
     pub others_dropped: u32,
     /// Other vehicles both current images show, through the same images.
     pub others: [OtherTarget; MAX_OTHER_TARGETS],
+    /// Each UAV's (left, right) pose-sample noise up to this pair.
+    pub pose_noise: [PoseNoise; 2],
 }
 
 impl Default for ObservationSetMsg {
@@ -294,6 +312,7 @@ impl Default for ObservationSetMsg {
             other_count: 0,
             others_dropped: 0,
             others: [OtherTarget::default(); MAX_OTHER_TARGETS],
+            pose_noise: [PoseNoise::default(); 2],
         }
     }
 }
@@ -455,9 +474,10 @@ mod tests {
         );
         assert_eq!(std::mem::size_of::<ObservationEntry>(), 120);
         assert_eq!(std::mem::size_of::<OtherTarget>(), 32 + 16 * 30 + 16);
+        assert_eq!(std::mem::size_of::<PoseNoise>(), 6 * 8 + 8 + 4 + 4);
         assert_eq!(
             std::mem::size_of::<ObservationSetMsg>(),
-            56 + 120 * MAX_OBSERVATIONS + 8 + 528 * MAX_OTHER_TARGETS
+            56 + 120 * MAX_OBSERVATIONS + 8 + 528 * MAX_OTHER_TARGETS + 2 * 64
         );
         let set = ObservationSetMsg {
             count: 99,

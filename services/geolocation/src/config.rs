@@ -163,6 +163,10 @@ pub struct EstimatorConfig {
     /// published as `Withheld` and counted (`withheld.h_acc`), never sent to ground
     /// control. 0 = off (the default: every estimate goes out with its honest accuracy).
     pub max_h_acc_m: f64,
+    /// Raise a UAV's white navigation σ's (or its jitter, where its error model is
+    /// correlated) to what its own pose samples show when they are noisier than
+    /// `noise_*` says (`telemetry_noise.rs`); never lowered. On by default.
+    pub noise_from_telemetry: bool,
 }
 
 impl Default for EstimatorConfig {
@@ -180,6 +184,7 @@ impl Default for EstimatorConfig {
             joint_bias_prior_deg: 30.0,
             temporal: crate::temporal::TemporalConfig::default(),
             max_h_acc_m: 0.0,
+            noise_from_telemetry: true,
         }
     }
 }

@@ -9,25 +9,38 @@
 //! `others_message`, and `sets_refused` (matching refused the pair as two vehicles),
 //! `target_on_track` (the other vehicles say the target's detections are another
 //! tracked vehicle's), `target_in_doubt` (right after a gap in the sets they put it in
-//! doubt); in all three the filter's prediction is published, the set's rays untaken.
+//! doubt); in all three the filter's prediction is published, the set's rays untaken;
+//! `sets_noise_raised` (sets estimated with a UAV's navigation noise raised to what its
+//! pose samples show, [`crate::telemetry_noise`]).
 
 use crate::others_message::{add_tracks, detection_identity};
 use crate::set_message::{coast_message, estimate_message};
 use crate::target_identity::IdentityCheck;
+use crate::telemetry_noise::{MeasuredNoise, NoiseRaise};
 use crate::tracks::{TrackConfig, Tracks};
 use crate::{EstimatorConfig, TemporalEstimator};
+use shared_types::conventions::Uav;
 use shared_types::messages::{EstimateMsg, ObservationSetMsg};
 use shared_types::stats::StageStats;
 
 /// The service's state between sets: the configured estimator's filter (`None` for the
 /// per-window methods), the other vehicles' tracks and the identity evidence.
 pub struct Geolocator {
+    /// As configured (`[estimator]`).
     pub config: EstimatorConfig,
     pub track_config: TrackConfig,
     pub temporal: Option<TemporalEstimator>,
     pub tracks: Tracks,
     /// Not checkpointed: after a restart the evidence builds up again in a few pairs.
     identity: IdentityCheck,
+    /// Which UAVs' σ's the pose samples have shown to be above the configured ones
+    /// (`telemetry_noise`; matching measures the samples and each set carries it). Not
+    /// checkpointed: after a restart the configured noise holds until the next set
+    /// shows more again.
+    raise: NoiseRaise,
+    /// `config` with each UAV's noise raised to what its pose samples show
+    /// (`[estimator] noise_from_telemetry`); what every estimate is made with.
+    effective: EstimatorConfig,
 }
 
 impl Geolocator {
@@ -44,6 +57,54 @@ impl Geolocator {
             temporal,
             tracks,
             identity: IdentityCheck::default(),
+            raise: NoiseRaise::new(),
+            effective: config,
+        }
+    }
+
+    /// Where the set's pose-sample noise (measured by matching over every frame it was
+    /// given) shows a UAV noisier than configured, raises its σ's in the estimates'
+    /// config and the filter's.
+    fn measure_noise(&mut self, set: &ObservationSetMsg, stats: &mut StageStats) {
+        if !self.config.noise_from_telemetry {
+            return;
+        }
+        let mut effective = self.config;
+        for uav in [Uav::Left, Uav::Right] {
+            let measured = MeasuredNoise::from_msg(&set.pose_noise[uav.index()]);
+            let raised = self
+                .raise
+                .raised(uav, measured.as_ref(), self.config.noise(uav));
+            match uav {
+                Uav::Left => effective.noise_left = raised,
+                Uav::Right => effective.noise_right = raised,
+            }
+        }
+        if effective != self.effective {
+            for uav in [Uav::Left, Uav::Right] {
+                let (configured, now) = (self.config.noise(uav), effective.noise(uav));
+                if self.effective.noise(uav) == configured && now != configured {
+                    tracing::info!(
+                        uav = ?uav,
+                        sigma_position_m = ?now.sigma_position_m,
+                        sigma_yaw_pitch_roll_deg = ?[now.sigma_yaw_deg, now.sigma_pitch_deg, now.sigma_roll_deg],
+                        position_jitter_m = now.position_jitter_m,
+                        attitude_jitter_deg = now.attitude_jitter_deg,
+                        "the pose samples are noisier than configured: σ's raised"
+                    );
+                }
+            }
+            if let Some(t) = self.temporal.as_mut() {
+                // Only σ's differ from the configuration the filter was built with.
+                if let Err(e) = t.set_noise(effective.noise_left, effective.noise_right) {
+                    tracing::warn!("measured noise not taken: {e}");
+                    return;
+                }
+            }
+            self.effective = effective;
+        }
+        if self.effective != self.config {
+            stats.count("sets_noise_raised", 1);
         }
     }
 
@@ -55,18 +116,32 @@ impl Geolocator {
         }
         self.tracks.start_over();
         self.identity = IdentityCheck::default();
+        // The same stream from its start: measured again from the configuration, so
+        // that every pass of a loop gives the same estimates.
+        self.raise = NoiseRaise::new();
+        self.effective = self.config;
+        if let Some(t) = self.temporal.as_mut() {
+            if let Err(e) = t.set_noise(self.config.noise_left, self.config.noise_right) {
+                tracing::warn!("configured noise not restored: {e}");
+            }
+        }
     }
 
     /// The estimate message of one set (its status says when there is none).
     pub fn estimate(&mut self, set: &ObservationSetMsg, stats: &mut StageStats) -> EstimateMsg {
+        self.measure_noise(set, stats);
         let track_config = self.track_config;
         // The other vehicles say whether the target's detections are one of them
         // (`target_identity`): then the filter coasts.
         let check = track_config.enabled && track_config.identity_check;
         let elsewhere = match (&self.temporal, check && set.refused == 0) {
-            (Some(filter), true) => {
-                detection_identity(set, filter, &self.tracks, &mut self.identity, &self.config)
-            }
+            (Some(filter), true) => detection_identity(
+                set,
+                filter,
+                &self.tracks,
+                &mut self.identity,
+                &self.effective,
+            ),
             _ => None,
         };
         // Right after a gap in the sets (the target hidden), a pair the other
@@ -95,12 +170,19 @@ impl Geolocator {
             );
         }
         let mut msg = if coast {
-            coast_message(set, &self.config, self.temporal.as_mut(), stats)
+            coast_message(set, &self.effective, self.temporal.as_mut(), stats)
         } else {
-            estimate_message(set, &self.config, self.temporal.as_mut(), stats)
+            estimate_message(set, &self.effective, self.temporal.as_mut(), stats)
         };
         if track_config.enabled {
-            add_tracks(set, &mut msg, &mut self.tracks, &self.config, stats, !coast);
+            add_tracks(
+                set,
+                &mut msg,
+                &mut self.tracks,
+                &self.effective,
+                stats,
+                !coast,
+            );
         }
         msg
     }
@@ -156,5 +238,48 @@ mod tests {
         let after = g.estimate(&refused(11.9), &mut stats);
         assert_eq!(after.status, EstimateStatus::Rejected as u32);
         assert_eq!(stats.counter("rejected.not_started"), not_started + 1);
+    }
+
+    /// A set whose pose noise (matching's measurement) shows the left UAV twice as
+    /// noisy as configured raises the left σ's in the filter, from then on; the right's
+    /// stay; `noise_from_telemetry = false`, a new segment or too few chords leave the
+    /// configuration as it is.
+    #[test]
+    fn the_sets_pose_noise_raises_the_filters_sigmas() {
+        use shared_types::messages::PoseNoise;
+        let noisy = |t_s: f64, chords: u32| {
+            let mut set = set_at(t_s);
+            set.pose_noise[0] = PoseNoise {
+                sigma: [6.0, 6.0, 6.0, 4.0, 4.0, 4.0],
+                mean_step_s: 1.0 / 30.0,
+                chords,
+                _reserved: 0,
+            };
+            set
+        };
+        let left = |g: &Geolocator| g.temporal.as_ref().unwrap().config.noise_left;
+        let right = |g: &Geolocator| g.temporal.as_ref().unwrap().config.noise_right;
+        let configured = crate::NoiseModel::default();
+        let mut g = geolocator();
+        let mut stats = StageStats::new("t");
+        g.estimate(&noisy(9.8, 10), &mut stats);
+        assert_eq!(left(&g), configured, "10 chords are too few");
+        g.estimate(&noisy(9.9, 300), &mut stats);
+        assert_eq!(left(&g).sigma_position_m, [6.0; 3]);
+        assert_eq!(left(&g).sigma_yaw_deg, 4.0);
+        assert_eq!(right(&g), configured);
+        assert_eq!(stats.counter("sets_noise_raised"), 1);
+        // Latched: a later set nearer the configuration keeps it raised to σ̂.
+        let mut calmer = noisy(10.0, 300);
+        calmer.pose_noise[0].sigma = [3.3; 6];
+        g.estimate(&calmer, &mut stats);
+        assert_eq!(left(&g).sigma_position_m, [3.3; 3]);
+        assert_eq!(left(&g).sigma_yaw_deg, 3.3);
+        g.start_over();
+        assert_eq!(left(&g), configured);
+        let mut off = geolocator();
+        off.config.noise_from_telemetry = false;
+        off.estimate(&noisy(9.9, 300), &mut stats);
+        assert_eq!(left(&off), configured);
     }
 }

@@ -12,6 +12,7 @@
 //! | Section 2.3, eq. (29)–(32): consistency filter | [`consistency`] |
 //! | Section 3.1: the one-shot baseline | [`one_shot`] |
 //! | several targets with the shared yaw biases (beyond the paper) | [`shared_bias`], [`tracks`] |
+//! | Q1–Q3's σ's (eq. 8–10) raised to what the pose samples show (beyond the paper) | [`telemetry_noise`] |
 //! | Section 3.1's scenario and eq. (33)–(34) | [`synthetic`], [`evaluation`] |
 //!
 //! Units: metres, pixels, radians inside; degrees only in [`EstimatorConfig`] and in
@@ -38,6 +39,7 @@ pub mod start_agreement;
 pub mod start_prior;
 pub mod synthetic;
 pub mod target_identity;
+pub mod telemetry_noise;
 pub mod temporal;
 pub mod temporal_snapshot;
 pub mod tracks;

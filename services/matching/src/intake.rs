@@ -405,6 +405,7 @@ impl Intake {
             rejected_past: rejections.len() as u32,
             segment: hl.segment,
             frames: [(hl.seq, hl.t_s), (hr.seq, hr.t_s)],
+            pose_noise: self.chain.pose_noise(),
         };
         let set = match outcome {
             MatchOutcome::NoDetection => {

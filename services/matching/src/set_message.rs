@@ -6,7 +6,9 @@
 use crate::chain::MatchedSet;
 use crate::chain::OthersOutcome;
 use geolocation::Observation;
-use shared_types::messages::{ObservationSetMsg, OtherTarget, MAX_OBSERVATIONS, MAX_OTHER_TARGETS};
+use shared_types::messages::{
+    ObservationSetMsg, OtherTarget, PoseNoise, MAX_OBSERVATIONS, MAX_OTHER_TARGETS,
+};
 
 /// What every set of one pair carries besides its observations.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -22,6 +24,8 @@ pub struct SetHeader {
     pub segment: u32,
     /// The current (left, right) frames' (seq, stream time).
     pub frames: [(u64, f64); 2],
+    /// Each UAV's pose-sample noise so far ([`crate::VisionChain::pose_noise`]).
+    pub pose_noise: [PoseNoise; 2],
 }
 
 impl SetHeader {
@@ -33,6 +37,7 @@ impl SetHeader {
             rejected_past: self.rejected_past,
             segment: self.segment,
             refused,
+            pose_noise: self.pose_noise,
             ..Default::default()
         }
     }
@@ -144,6 +149,15 @@ mod tests {
             rejected_past: 1,
             segment: 2,
             frames: [(9, 1.5), (9, 1.51)],
+            pose_noise: [
+                PoseNoise {
+                    sigma: [3.1, 2.9, 3.0, 2.1, 1.9, 2.0],
+                    mean_step_s: 1.0 / 30.0,
+                    chords: 40,
+                    _reserved: 0,
+                },
+                PoseNoise::default(),
+            ],
         }
     }
 
@@ -192,6 +206,7 @@ mod tests {
         let msg = matched_set(&header(), &matched, &others);
         assert_eq!((msg.pair_seq, msg.refused, msg.segment), (9, 0, 2));
         assert_eq!((msg.rejected_past, msg.capture_ns, msg.t_s), (1, 5, 1.5));
+        assert_eq!(msg.pose_noise, header().pose_noise);
         assert_eq!(msg.count, 4);
         let e = msg.entries();
         assert_eq!(
@@ -234,5 +249,7 @@ mod tests {
         assert_eq!((msg.refused, msg.count, msg.other_count), (1, 2, 0));
         assert_eq!(msg.entries()[1].frame_seq, 9);
         assert_eq!(msg.entries()[1].uav, 1);
+        // Geolocation raises its σ's from it on refused sets too.
+        assert_eq!(msg.pose_noise, header().pose_noise);
     }
 }

@@ -19,6 +19,7 @@ use crate::score::look_alike::of_a_look_alike;
 use acquisition::sim::texture::hash;
 use acquisition::sim::{Presets, SimConfig};
 use anyhow::{Context, Result};
+use geolocation::{EstimatorConfig, NoiseModel};
 use matching::MatchingConfig;
 use serde::{Deserialize, Serialize};
 use shared_types::conventions::wrap_angle;
@@ -114,6 +115,12 @@ pub struct Plan {
     /// Whether a kept run with the same key is read back instead of run again
     /// (`--fresh` turns it off; the runs are still written).
     pub reuse: bool,
+    /// The filter is told `[estimator]`'s default noise model instead of the scene's
+    /// (`--told-default-noise`).
+    pub told_default_noise: bool,
+    /// The sensors' σ_pos (m) and σ_att (°) instead of the Table 2 values
+    /// (`--sensor-noise`).
+    pub sensor_noise: Option<(f64, f64)>,
 }
 
 /// One (scene, navigation model): its runs and their summary.
@@ -127,6 +134,17 @@ pub struct SceneRuns {
     pub summary: SceneSummary,
 }
 
+/// The estimator a run is told: the scene's own noise, or with `told_default_noise`
+/// `[estimator]`'s default noise model (what `dualgeo run` is told).
+fn told(config: &SimConfig, told_default_noise: bool) -> EstimatorConfig {
+    let mut estimator = estimator_for(config);
+    if told_default_noise {
+        estimator.noise_left = NoiseModel::default();
+        estimator.noise_right = NoiseModel::default();
+    }
+    estimator
+}
+
 /// One run: the seeded scene through the chain and the default estimator, through an
 /// H.264 video link at `crf` when given.
 pub fn run_one(
@@ -134,8 +152,9 @@ pub fn run_one(
     every: u64,
     matching: &MatchingConfig,
     crf: Option<u8>,
+    told_default_noise: bool,
 ) -> Result<RunRecord> {
-    let estimator = estimator_for(&config);
+    let estimator = told(&config, told_default_noise);
     let mut scene = match crf {
         Some(crf) => SceneStream::through_video(config.clone(), every, crf)?,
         None => SceneStream::new(config.clone(), every)?,
@@ -186,12 +205,30 @@ pub fn run_one(
 
 /// The cache file of one run: named by scene, model and seed, keyed by everything that
 /// decides its result.
-fn cache_file(dir: &Path, scene: &str, nav: NavModel, crf: Option<u8>, seed: u64) -> PathBuf {
+fn cache_file(
+    dir: &Path,
+    scene: &str,
+    nav: NavModel,
+    crf: Option<u8>,
+    seed: u64,
+    told_default_noise: bool,
+) -> PathBuf {
     let link = crf.map(|c| format!("-crf{c}")).unwrap_or_default();
-    dir.join(format!("{scene}-{}{link}-{seed:03}.json", nav.name()))
+    let told = if told_default_noise {
+        "-told-default"
+    } else {
+        ""
+    };
+    dir.join(format!("{scene}-{}{link}{told}-{seed:03}.json", nav.name()))
 }
 
-fn run_key(config: &SimConfig, every: u64, matching: &MatchingConfig, crf: Option<u8>) -> String {
+fn run_key(
+    config: &SimConfig,
+    every: u64,
+    matching: &MatchingConfig,
+    crf: Option<u8>,
+    told_default_noise: bool,
+) -> String {
     let mut h = std::collections::hash_map::DefaultHasher::new();
     // A run without a link keeps the key it had before links existed.
     let link = crf.map(|c| format!(" crf {c}")).unwrap_or_default();
@@ -200,12 +237,17 @@ fn run_key(config: &SimConfig, every: u64, matching: &MatchingConfig, crf: Optio
     } else {
         format!(" correlated {CORRELATED_FORMAT}")
     };
+    // A run told its scene's own noise keeps the key it had before
+    // `noise_from_telemetry` existed: the pose samples are then as noisy as it is told
+    // and nothing is raised (24 kept runs flown again gave the same records).
+    let estimator = format!("{:?}", told(config, told_default_noise))
+        .replace(", noise_from_telemetry: true", "");
     format!(
-        "{RUN_FORMAT} {every} {:?} {:?} {:?} {:?} {}{link}{correlated}",
+        "{RUN_FORMAT} {every} {:?} {:?} {:?} {} {}{link}{correlated}",
         config,
         detection::ColourBlobConfig::default(),
         matching,
-        estimator_for(config),
+        estimator,
         env!("CARGO_PKG_VERSION")
     )
     .hash(&mut h);
@@ -243,7 +285,11 @@ pub fn run(plan: &Plan, progress: &indicatif::ProgressBar) -> Result<(Vec<SceneR
             );
             for crf in links {
                 for seed in 1..=*seeds {
-                    let config = seeded(base.clone(), seed, *nav);
+                    let mut config = seeded(base.clone(), seed, *nav);
+                    if let Some((pos, att)) = plan.sensor_noise {
+                        config.noise.sigma_position_m = [pos; 3];
+                        config.noise.sigma_attitude_deg = [att; 3];
+                    }
                     jobs.push((scene.clone(), *nav, crf, seed, config));
                 }
             }
@@ -331,11 +377,17 @@ fn run_cached(
     seed: u64,
     config: &SimConfig,
 ) -> Result<(RunRecord, bool)> {
-    let key = run_key(config, plan.every, &plan.matching, crf);
+    let key = run_key(
+        config,
+        plan.every,
+        &plan.matching,
+        crf,
+        plan.told_default_noise,
+    );
     let file = plan
         .cache
         .as_ref()
-        .map(|d| cache_file(d, scene, nav, crf, seed));
+        .map(|d| cache_file(d, scene, nav, crf, seed, plan.told_default_noise));
     if let (Some(f), true) = (&file, plan.reuse) {
         if let Ok(text) = std::fs::read_to_string(f) {
             if let Ok(c) = serde_json::from_str::<Cached>(&text) {
@@ -345,7 +397,13 @@ fn run_cached(
             }
         }
     }
-    let record = run_one(config.clone(), plan.every, &plan.matching, crf)?;
+    let record = run_one(
+        config.clone(),
+        plan.every,
+        &plan.matching,
+        crf,
+        plan.told_default_noise,
+    )?;
     if let Some(f) = &file {
         let tmp = f.with_extension("json.tmp");
         let text = serde_json::to_string(&Cached {
@@ -408,7 +466,7 @@ mod tests {
                 .map(|&seed| {
                     let mut config = seeded(base.clone(), seed, NavModel::White);
                     config.duration_s = 20.0;
-                    s.spawn(move || run_one(config, 2, &MatchingConfig::default(), None))
+                    s.spawn(move || run_one(config, 2, &MatchingConfig::default(), None, false))
                 })
                 .collect();
             handles

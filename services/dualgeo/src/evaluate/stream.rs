@@ -383,6 +383,7 @@ impl Lane {
             rejected_past: rejections.len() as u32,
             segment: 0,
             frames: [(f[0].seq, f[0].t_s), (f[1].seq, f[1].t_s)],
+            pose_noise: self.chain.pose_noise(),
         };
         let mut cpu_us = 0.0;
         let (mut default, mut paper) = (None, None);

@@ -25,13 +25,14 @@ pub use crate::frame::{extract_undistorted, ChainCounts, ChainError, FrameInput,
 use crate::frame_tracking::{FrameTracker, Observed};
 use crate::ground_plane::PlaneModel;
 use crate::ring::{Keyframe, KeyframeRing};
+use geolocation::telemetry_noise::TelemetryNoise;
 use geolocation::{
     geolocate, geolocate_filtered, Estimate, EstimatorConfig, EstimatorError, FilteredEstimate,
     Observation,
 };
 use nalgebra::{Matrix3, Vector2};
 use shared_types::conventions::{Intrinsics, Uav};
-use shared_types::messages::PoseSample;
+use shared_types::messages::{PoseNoise, PoseSample};
 use std::collections::{BTreeMap, VecDeque};
 use std::time::Instant;
 
@@ -217,6 +218,10 @@ pub struct VisionChain {
     landings: VecDeque<LandingReport>,
     /// The stream segment (`FrameHeader::segment`) the trackers and rings are of.
     pub(crate) segment: u32,
+    /// The white noise of each UAV's pose samples over the frames given to
+    /// [`VisionChain::match_current`] (`geolocation::telemetry_noise`; every set
+    /// carries it, [`VisionChain::pose_noise`]).
+    telemetry: TelemetryNoise,
 }
 
 fn micros(since: Instant) -> f64 {
@@ -246,6 +251,7 @@ impl VisionChain {
             landed_admissions: [false; 2],
             landings: VecDeque::new(),
             segment: 0,
+            telemetry: TelemetryNoise::new(),
             config,
             estimator,
         })
@@ -272,6 +278,7 @@ impl VisionChain {
         self.rings = [(); 2]
             .map(|_| KeyframeRing::new(self.config.ring_capacity, self.config.keyframe_spacing_m));
         self.smoothed = [None, None];
+        self.telemetry = TelemetryNoise::new();
         self.priors.clear();
         self.failed.clear();
         self.links.clear();
@@ -374,10 +381,17 @@ impl VisionChain {
     /// two raw fixes has σ ≈ 4 m per axis against T_re = 8 m. An exponential average
     /// with time constant `baseline_smoothing_s` cuts that to ~1 m. Its lag is the same
     /// for every frame, so distances between smoothed positions stay right.
+    /// Both UAVs' pose-sample noise up to the last pair matched (as each set carries
+    /// it: `chords` 0 where not measured yet).
+    pub fn pose_noise(&self) -> [PoseNoise; 2] {
+        self.telemetry.to_msg()
+    }
+
     fn track(&mut self, frames: [&FrameMeta; 2]) {
         let tau = self.config.baseline_smoothing_s;
         for uav in [Uav::Left, Uav::Right] {
             let f = frames[uav.index()];
+            self.telemetry.add(uav, f.t_s, &f.pose);
             let slot = &mut self.smoothed[uav.index()];
             *slot = Some(smoothed_next(*slot, f.t_s, f.pose.position(), tau));
         }
