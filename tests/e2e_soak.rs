@@ -83,8 +83,26 @@ fn a_sixty_second_soak_reports_flat_memory_and_streams_its_outputs() {
     // comes after the warm-up, the floor steps once. A leak keeps rising after it.
     let after: Vec<&Vec<f64>> = samples.iter().filter(|s| s[0] > 30.5).collect();
     for (col, name) in header.iter().enumerate() {
-        let values: Vec<f64> = after.iter().map(|s| s[col]).collect();
-        if name.starts_with("rss_kib_") {
+        let mut values: Vec<f64> = after.iter().map(|s| s[col]).collect();
+        if let Some(process) = name.strip_prefix("rss_kib_") {
+            // Private memory: the RSS less the shared memory. iceoryx2's pools are fixed
+            // in size, and their pages count in RSS from the first time a slot is
+            // written: in a run of the whole test suite here acquisition was at
+            // 86 776 KiB until a backlog at ~40 s first wrote 4 more 640 x 480 frame
+            // slots, then 90 376-91 000 KiB, flat (its RssAnon and RssFile unchanged;
+            // runs alone are at 90 884 from the start). `shm_kib_*` is reported and
+            // not judged here (docs/reliability.md).
+            let shm = header
+                .iter()
+                .position(|h| *h == format!("shm_kib_{process}"))
+                .expect("a shm_kib column per process");
+            for (v, s) in values.iter_mut().zip(&after) {
+                *v -= s[shm];
+            }
+            eprintln!(
+                "shm_kib_{process}: {:?}",
+                after.iter().map(|s| s[shm]).collect::<Vec<_>>()
+            );
             assert!(values.iter().all(|v| *v > 1000.0), "{name}: {values:?}");
             // A leak raises the floor; a sample taken while a process holds a transient
             // working set only rises above it. The floor of the last three samples is
@@ -102,7 +120,7 @@ fn a_sixty_second_soak_reports_flat_memory_and_streams_its_outputs() {
             // processes under ~75 MB (20 MB); a leak faster than ~60 KiB/s (~75 KiB/s in
             // the 90 MB acquisition) still fails here, and the hour in
             // docs/reliability.md is the test of a slow one.
-            eprintln!("{name}: {values:?}");
+            eprintln!("{name} less shm_kib_{process}: {values:?}");
             assert!(values.len() >= 5, "{name}: {values:?}");
             let floor = |v: &[f64]| v.iter().copied().fold(f64::INFINITY, f64::min);
             let (head, tail) = (floor(&values[..3]), floor(&values[values.len() - 3..]));
