@@ -5,45 +5,19 @@
 //! `geolocation::telemetry_noise`): the stated accuracy then widens to what the
 //! sensors allow, where with the switch off it claims twice the accuracy it has.
 
+#[path = "support/cli.rs"]
+mod cli;
 #[path = "support/scratch.rs"]
 mod scratch;
 
+use cli::{dualgeo, rows};
 use scratch::{json, Scratch};
 use std::collections::HashMap;
-use std::process::Command;
 
 const PRESETS: &str = concat!(
     env!("CARGO_MANIFEST_DIR"),
     "/../acquisition/presets/scenarios.toml"
 );
-
-fn dualgeo(args: &[&str]) {
-    let o = Command::new(env!("CARGO_BIN_EXE_dualgeo"))
-        .args(args)
-        .output()
-        .expect("spawn dualgeo");
-    assert!(
-        o.status.success(),
-        "dualgeo {}: {}",
-        args.join(" "),
-        String::from_utf8_lossy(&o.stderr)
-    );
-}
-
-fn rows(path: &std::path::Path) -> Vec<HashMap<String, String>> {
-    let text = std::fs::read_to_string(path).unwrap();
-    let mut lines = text.lines();
-    let header: Vec<&str> = lines.next().unwrap().split(',').collect();
-    lines
-        .map(|l| {
-            header
-                .iter()
-                .zip(l.split(','))
-                .map(|(h, v)| (h.to_string(), v.to_string()))
-                .collect()
-        })
-        .collect()
-}
 
 /// (estimates, median h_acc, share beyond 3× the stated accuracy) of the target's
 /// track against the left camera's truth.

@@ -8,45 +8,18 @@
 //! (With the paper's errors the tilted start is not yet trustworthy: docs/evaluation
 //! and the recording format's page give the Monte Carlo figures.)
 
+#[path = "support/cli.rs"]
+mod cli;
 #[path = "support/scratch.rs"]
 mod scratch;
 
+use cli::{dualgeo, rows};
 use scratch::Scratch;
-use std::collections::HashMap;
-use std::process::Command;
 
 const PRESETS: &str = concat!(
     env!("CARGO_MANIFEST_DIR"),
     "/../acquisition/presets/scenarios.toml"
 );
-
-fn dualgeo(args: &[&str]) {
-    let o = Command::new(env!("CARGO_BIN_EXE_dualgeo"))
-        .args(args)
-        .output()
-        .expect("spawn dualgeo");
-    assert!(
-        o.status.success(),
-        "dualgeo {}: {}",
-        args.join(" "),
-        String::from_utf8_lossy(&o.stderr)
-    );
-}
-
-fn rows(path: &std::path::Path) -> Vec<HashMap<String, String>> {
-    let text = std::fs::read_to_string(path).unwrap();
-    let mut lines = text.lines();
-    let header: Vec<&str> = lines.next().unwrap().split(',').collect();
-    lines
-        .map(|l| {
-            header
-                .iter()
-                .zip(l.split(','))
-                .map(|(h, v)| (h.to_string(), v.to_string()))
-                .collect()
-        })
-        .collect()
-}
 
 #[test]
 fn a_tilted_camera_recording_is_geolocated_within_a_metre_after_the_start() {

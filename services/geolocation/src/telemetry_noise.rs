@@ -363,23 +363,33 @@ mod tests {
     /// `seconds` of samples at `hz` with white noise σ_pos, σ_att.
     fn fly(seed: u64, hz: f64, seconds: f64, sigma_pos: f64, sigma_att: f64) -> TelemetryNoise {
         let mut rng = rand::rngs::StdRng::seed_from_u64(seed);
-        let p = Normal::new(0.0, sigma_pos).unwrap();
-        let a = Normal::new(0.0, sigma_att).unwrap();
         let mut noise = TelemetryNoise::new();
         let frames = (seconds * hz) as usize;
         for k in 0..frames {
             let t = k as f64 / hz;
-            let mut y = truth(t);
-            for (c, v) in y.iter_mut().enumerate() {
-                *v += if c < 3 {
-                    p.sample(&mut rng)
-                } else {
-                    a.sample(&mut rng)
-                };
-            }
-            noise.add(Uav::Left, t, &pose(y));
+            noise.add(
+                Uav::Left,
+                t,
+                &pose(measured(t, &mut rng, sigma_pos, sigma_att)),
+            );
         }
         noise
+    }
+
+    /// The true pose at `t` with white noise σ_pos (m) and σ_att (°) added.
+    fn measured(
+        t: f64,
+        rng: &mut rand::rngs::StdRng,
+        sigma_pos: f64,
+        sigma_att: f64,
+    ) -> [f64; CHANNELS] {
+        let p = Normal::new(0.0, sigma_pos).unwrap();
+        let a = Normal::new(0.0, sigma_att).unwrap();
+        let mut y = truth(t);
+        for (c, v) in y.iter_mut().enumerate() {
+            *v += if c < 3 { p.sample(rng) } else { a.sample(rng) };
+        }
+        y
     }
 
     #[test]
@@ -412,21 +422,11 @@ mod tests {
         let configured = NoiseModel::default();
         for seed in 0..40 {
             let mut rng = rand::rngs::StdRng::seed_from_u64(seed);
-            let p = Normal::new(0.0, 3.0).unwrap();
-            let a = Normal::new(0.0, 2.0).unwrap();
             let mut noise = TelemetryNoise::new();
             let mut raise = NoiseRaise::new();
             for k in 0..600 {
                 let t = k as f64 / 30.0;
-                let mut y = truth(t);
-                for (c, v) in y.iter_mut().enumerate() {
-                    *v += if c < 3 {
-                        p.sample(&mut rng)
-                    } else {
-                        a.sample(&mut rng)
-                    };
-                }
-                noise.add(Uav::Left, t, &pose(y));
+                noise.add(Uav::Left, t, &pose(measured(t, &mut rng, 3.0, 2.0)));
                 assert_eq!(
                     raise.raised(Uav::Left, noise.measured(Uav::Left).as_ref(), &configured),
                     configured,
@@ -527,19 +527,10 @@ mod tests {
     #[test]
     fn steps_and_jumps_are_outliers() {
         let mut rng = rand::rngs::StdRng::seed_from_u64(6);
-        let p = Normal::new(0.0, 3.0).unwrap();
-        let a = Normal::new(0.0, 2.0).unwrap();
         let mut noise = TelemetryNoise::new();
         for k in 0..600 {
             let t = k as f64 / 30.0;
-            let mut y = truth(t);
-            for (c, v) in y.iter_mut().enumerate() {
-                *v += if c < 3 {
-                    p.sample(&mut rng)
-                } else {
-                    a.sample(&mut rng)
-                };
-            }
+            let mut y = measured(t, &mut rng, 3.0, 2.0);
             if k >= 300 {
                 y[4] += 12.0;
                 y[0] += 20.0;
