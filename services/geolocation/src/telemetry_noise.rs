@@ -110,12 +110,17 @@ struct Series {
     chords: [VecDeque<f64>; CHANNELS],
     /// Each chord's mean time step, seconds.
     steps: VecDeque<f64>,
+    /// The measurement over the chords so far (from [`MIN_CHORDS`] on).
+    latest: Option<MeasuredNoise>,
 }
 
 /// Per UAV, the chords of its pose samples (see the module's documentation).
 #[derive(Debug, Clone, Default)]
 pub struct TelemetryNoise {
     series: [Series; 2],
+    /// The absolute chords of one channel, sorted in part for their median: kept, so
+    /// that a frame's measurement allocates nothing.
+    scratch: Vec<f64>,
 }
 
 /// Per UAV and channel, whether its σ̂ has refuted the configured σ: raised from then
@@ -193,20 +198,17 @@ impl TelemetryNoise {
                 q.pop_front();
             }
         }
+        let n = s.chords[0].len();
+        s.latest = (n >= MIN_CHORDS).then(|| MeasuredNoise {
+            sigma: std::array::from_fn(|c| robust_sigma(&s.chords[c], &mut self.scratch)),
+            chords: n,
+            mean_step_s: s.steps.iter().sum::<f64>() / s.steps.len() as f64,
+        });
     }
 
     /// The measured noise of `uav`, once it has [`MIN_CHORDS`] chords.
     pub fn measured(&self, uav: Uav) -> Option<MeasuredNoise> {
-        let s = &self.series[uav.index()];
-        let n = s.chords[0].len();
-        if n < MIN_CHORDS {
-            return None;
-        }
-        Some(MeasuredNoise {
-            sigma: std::array::from_fn(|c| robust_sigma(&s.chords[c])),
-            chords: n,
-            mean_step_s: s.steps.iter().sum::<f64>() / s.steps.len().max(1) as f64,
-        })
+        self.series[uav.index()].latest
     }
 
     /// Both UAVs' measured noise as the set message carries it (`chords` 0 where not
@@ -307,10 +309,11 @@ impl NoiseRaise {
 
 /// σ of chords that are N(0, σ²) but for a few outliers: the RMS of those within
 /// 3.5 MAD-σ's, corrected for the cut.
-fn robust_sigma(chords: &VecDeque<f64>) -> f64 {
-    let mut abs: Vec<f64> = chords.iter().map(|r| r.abs()).collect();
-    let mid = abs.len() / 2;
-    let (_, median, _) = abs.select_nth_unstable_by(mid, f64::total_cmp);
+fn robust_sigma(chords: &VecDeque<f64>, scratch: &mut Vec<f64>) -> f64 {
+    scratch.clear();
+    scratch.extend(chords.iter().map(|r| r.abs()));
+    let mid = scratch.len() / 2;
+    let (_, median, _) = scratch.select_nth_unstable_by(mid, f64::total_cmp);
     let mad_sigma = 1.4826 * *median;
     if mad_sigma <= 0.0 {
         return 0.0;
