@@ -96,7 +96,8 @@ pub struct EvaluateArgs {
     /// 3 m, σ_att 2°), as `dualgeo run` is told, instead of each scene's own: how the
     /// stated accuracy holds on sensors noisier or quieter than configured (the
     /// filter raises its σ's where the pose samples show more noise,
-    /// `[estimator] noise_from_telemetry`). White errors only.
+    /// `[estimator] noise_from_telemetry`). The default model is white: under
+    /// `--nav gauss-markov` the filter is then told the errors are white.
     #[arg(long, requires = "monte_carlo")]
     pub told_default_noise: bool,
     /// Monte Carlo: the sensors' σ_pos (m) and σ_att (°), e.g. `6,4`, instead of the
