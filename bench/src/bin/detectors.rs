@@ -291,12 +291,13 @@ fn fly(
                 let start = Instant::now();
                 let found = designated.detect(camera, frame, None)?;
                 let cost = ms(start);
+                // This camera's counts for this frame alone.
+                let c = designated.take_counts();
                 if args.trace && camera == 0 {
-                    let c = designated.take_counts();
                     if c.no_ground > 0 {
                         eprintln!("frame {k}: the ground's motion was not measured");
                     }
-                    trace(k, truth, found, &designated);
+                    trace(k, truth, found, c.held > 0, &designated);
                 }
                 if k >= warm_up {
                     t.designated.see(truth, found, args.hit_px, cost);
@@ -317,11 +318,17 @@ fn fly(
 }
 
 /// One line per frame of the designated motion detector's left camera (`--trace`).
-fn trace(k: u64, truth: Option<[f64; 2]>, found: Option<Detection>, d: &MotionDetector) {
+fn trace(
+    k: u64,
+    truth: Option<[f64; 2]>,
+    found: Option<Detection>,
+    held: bool,
+    d: &MotionDetector,
+) {
     let near = |c: [f64; 2]| truth.map_or(f64::NAN, |t| (c[0] - t[0]).hypot(c[1] - t[1]));
     let round = |p: [f64; 2]| [p[0].round(), p[1].round()];
     eprintln!(
-        "frame {k}: truth {:?} track (image, ground, missed) {:?} found at {:.1} px {:?}; movers (distance, area) {:?}",
+        "frame {k}: truth {:?} track (image, ground, missed) {:?} found at {:.1} px {:?}{}; movers (distance, area) {:?}",
         truth.map(round),
         d.track_state(0).map(|([a, b], n)| (round(a), round(b), n)),
         found.map_or(f64::NAN, |f| near(f.centre)),
@@ -329,6 +336,7 @@ fn trace(k: u64, truth: Option<[f64; 2]>, found: Option<Detection>, d: &MotionDe
             (f.centre[0] - t[0]) as f32,
             (f.centre[1] - t[1]) as f32
         ]),
+        if held { " (held by its patch)" } else { "" },
         d.last_movers()
             .iter()
             .map(|m| (near(m.centre).round(), m.area_px))

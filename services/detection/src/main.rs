@@ -27,7 +27,8 @@
 //! `model_found`, `tracked`, `track_lost`, and the histogram `model` (µs per model run,
 //! on its own thread). With `kind = "motion"` (`detection::motion`): `movers` (blobs
 //! moving against the ground, summed over frames), `no_ground` (frames whose ground
-//! motion was not measured), `acquired` and `track_lost`. With `[detection] candidates`
+//! motion was not measured), `acquired`, `track_lost` and `held` (frames whose target
+//! was its patch from the last frame it moved in). With `[detection] candidates`
 //! (default; the colour detector adds every blob of another vivid colour and every
 //! white vehicle, `[detection.others]`): `candidates` (other objects published beside the target, summed over
 //! frames), `candidates_overflow` (left out for room) and `candidates_failed`.
@@ -312,6 +313,7 @@ impl Detecting {
                 stats.count("no_ground", counts.no_ground);
                 stats.count("acquired", counts.acquired);
                 stats.count("track_lost", counts.track_lost);
+                stats.count("held", counts.held);
             }
         }
         if let Some(d) = found {

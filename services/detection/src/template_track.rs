@@ -61,6 +61,21 @@ impl TemplateTrack {
         point: [f64; 2],
         now: &cv::Mat,
     ) -> opencv::Result<Option<([f64; 2], f64)>> {
+        if !self.learn(seen, bbox, point)? {
+            return Ok(None);
+        }
+        self.follow(now)
+    }
+
+    /// Cuts the patch `bbox` (`[left, top, width, height]`, around the target point
+    /// `point`) out of `seen` and tracks from there; false (no track) when the box is
+    /// not wholly inside `seen`.
+    pub fn learn(
+        &mut self,
+        seen: &cv::Mat,
+        bbox: [f64; 4],
+        point: [f64; 2],
+    ) -> opencv::Result<bool> {
         self.track = None;
         let [x, y, w, h] = bbox;
         let rect = cv::Rect::new(
@@ -74,7 +89,7 @@ impl TemplateTrack {
             && rect.x + rect.width <= seen.cols()
             && rect.y + rect.height <= seen.rows();
         if !inside {
-            return Ok(None);
+            return Ok(false);
         }
         let template = cv::Mat::roi(seen, rect)?.try_clone()?;
         // The patch's own centre (pixel convention) in `seen`.
@@ -89,7 +104,7 @@ impl TemplateTrack {
             score: 1.0,
             offset: [point[0] - centre[0], point[1] - centre[1]],
         });
-        self.follow(now)
+        Ok(true)
     }
 
     /// Finds the patch in `now` around its last position: the target point and the
@@ -165,6 +180,17 @@ impl TemplateTrack {
             track.centre[1] + track.offset[1],
         ];
         Ok(Some((point, best)))
+    }
+
+    /// How much the patch's levels spread: the standard deviation of its largest
+    /// channel (0 without a patch).
+    pub fn spread(&self) -> opencv::Result<f64> {
+        let Some(t) = &self.track else {
+            return Ok(0.0);
+        };
+        let (mut mean, mut sd) = (cv::Scalar::default(), cv::Scalar::default());
+        cv::mean_std_dev(&t.template, &mut mean, &mut sd, &cv::no_array())?;
+        Ok(sd.0.into_iter().fold(0.0, f64::max))
     }
 
     /// The box `[left, top, width, height]` around the track's centre.

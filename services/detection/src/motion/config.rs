@@ -44,6 +44,12 @@ pub struct MotionConfig {
     /// A mover is the track's only if its mean colour is within this of the track's
     /// in every channel (a white car beside a silver one is not it).
     pub colour_tolerance: f64,
+    /// On a frame where the target shows no mover (it looks like the ground it is on,
+    /// for a moment), its patch from the last frame it did is looked for near the
+    /// track, for at most this many frames (`hold.rs`); 0: off.
+    pub hold_frames: u32,
+    /// ... and taken where it correlates (normalised, zero-mean) at least this well.
+    pub hold_min_score: f64,
 }
 
 impl Default for MotionConfig {
@@ -61,6 +67,8 @@ impl Default for MotionConfig {
             acquire_radius_px: 60.0,
             acquire_bgr: None,
             colour_tolerance: 25.0,
+            hold_frames: 30,
+            hold_min_score: 0.8,
         }
     }
 }
@@ -86,6 +94,10 @@ impl MotionConfig {
             return Err(
                 "threshold must be in (0, 255]; track_radius_px, acquire_radius_px and colour_tolerance > 0".into(),
             );
+        }
+        let min = crate::template_track::MIN_SCORE;
+        if !(self.hold_min_score.is_finite() && (min..=1.0).contains(&self.hold_min_score)) {
+            return Err(format!("hold_min_score must be in [{min}, 1]"));
         }
         if self
             .acquire_px

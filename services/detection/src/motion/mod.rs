@@ -30,6 +30,7 @@
 
 mod config;
 pub mod ground_motion;
+mod hold;
 pub mod movers;
 #[cfg(test)]
 mod test_scene;
@@ -40,6 +41,7 @@ pub use config::MotionConfig;
 use crate::prediction_gate::Gate;
 use crate::{DetectError, Detection};
 use ground_motion::{scale_matrix, GroundMotion, History};
+use hold::Hold;
 use movers::{Differencer, Mover};
 use nalgebra::{Matrix3, Vector3};
 use opencv::core as cv;
@@ -58,6 +60,8 @@ pub struct MotionCounts {
     pub acquired: u64,
     /// Tracks dropped after 4 × `coast_frames` frames without the target.
     pub track_lost: u64,
+    /// Frames whose target was its patch, held without a mover (`hold.rs`).
+    pub held: u64,
 }
 
 #[derive(Default)]
@@ -68,6 +72,8 @@ struct Camera {
     grey: cv::Mat,
     previous: Option<(cv::Mat, cv::Mat)>,
     track: Option<Track>,
+    /// The target's patch from the last frame it moved in.
+    hold: Hold,
     /// Where to acquire when there is no track (the designation), once.
     designated: Option<[f64; 2]>,
     frames: u64,
@@ -293,6 +299,37 @@ impl MotionDetector {
                 }
             }
         }
+        // No mover for the target: its patch, where the track is against the ground
+        // (`hold.rs`).
+        let held = match (&outlined, &cam.track) {
+            (None, Some(t)) if !t.blind && c.hold_frames > 0 => {
+                cam.hold
+                    .find(frame, t.predictions()[1], gate.as_ref(), &c)?
+            }
+            _ => None,
+        };
+        match (&outlined, held) {
+            (Some(m), _) if c.hold_frames > 0 => {
+                // Where the track expected it, if it was found in the last frame too.
+                let expected = cam
+                    .track
+                    .filter(|t| t.missed == 0 && !t.blind)
+                    .map(|t| t.predictions());
+                cam.hold.learn(frame, m, expected)?;
+            }
+            (None, Some(m)) => {
+                if let Some(t) = &mut cam.track {
+                    t.held(m.centre);
+                }
+                self.counts.held += 1;
+                return Ok(Some(Detection {
+                    bbox: m.bbox,
+                    centre: m.centre,
+                    confidence: 1.0,
+                }));
+            }
+            _ => {}
+        }
         if cam.update_track(outlined.as_ref(), &c) {
             self.counts.track_lost += 1;
         }
@@ -308,6 +345,7 @@ impl MotionDetector {
     pub fn designate(&mut self, camera: usize, px: [f64; 2]) {
         if let Some(cam) = self.cameras.get_mut(camera) {
             cam.track = None;
+            cam.hold.forget();
             cam.designated = Some(px);
         }
     }

@@ -16,6 +16,9 @@ pub(super) struct Track {
     pub(super) image_velocity: [f64; 2],
     pub(super) ground_velocity: [f64; 2],
     pub(super) missed: u32,
+    /// Frames held by its patch since the last mover (`hold.rs`): its place against
+    /// the ground is still the last mover's, carried, plus its own motion since.
+    pub(super) held: u32,
     /// Its mean colour, smoothed, and when the track started: a mover matches when
     /// it is near either (wrong picks cannot drag the colour away from the target's).
     pub(super) bgr: [f64; 3],
@@ -33,6 +36,7 @@ impl Track {
             image_velocity: [0.0; 2],
             ground_velocity: [0.0; 2],
             missed: 0,
+            held: 0,
             bgr: m.bgr,
             first_bgr: m.bgr,
             blind: false,
@@ -55,25 +59,27 @@ impl Track {
     /// a guess, and a long extrapolation of a wrong one runs away.
     pub(super) fn predictions(&self) -> [[f64; 2]; 2] {
         let n = (self.missed + 1).min(EXTRAPOLATE_FRAMES) as f64;
+        let g = n + self.held as f64;
         [
             [
                 self.centre[0] + n * self.image_velocity[0],
                 self.centre[1] + n * self.image_velocity[1],
             ],
             [
-                self.carried[0] + n * self.ground_velocity[0],
-                self.carried[1] + n * self.ground_velocity[1],
+                self.carried[0] + g * self.ground_velocity[0],
+                self.carried[1] + g * self.ground_velocity[1],
             ],
         ]
     }
 
     /// Found again as `m`. An α–β filter: each velocity moves by [`VELOCITY_GAIN`] of
     /// the prediction's miss, clamped to [`MAX_VELOCITY_STEP_PX`], and only when the
-    /// previous frame found it too (a pick after a gap may be wrong, and would teach a
-    /// wrong velocity that the next gap extrapolates).
+    /// previous frame found it as a mover too (a pick after a gap, or after frames
+    /// held by its patch, may be wrong, and would teach a wrong velocity that the next
+    /// gap extrapolates).
     pub(super) fn found(&mut self, m: &Mover) {
         let at = m.centre;
-        if self.missed == 0 {
+        if self.missed == 0 && self.held == 0 {
             let [image, ground] = self.predictions();
             let step =
                 |miss: f64| VELOCITY_GAIN * miss.clamp(-MAX_VELOCITY_STEP_PX, MAX_VELOCITY_STEP_PX);
@@ -88,7 +94,18 @@ impl Track {
         self.centre = at;
         self.carried = at;
         self.missed = 0;
+        self.held = 0;
         self.blind = false;
+    }
+
+    /// Held at `at` by its patch (no mover: `hold.rs`): its place in the image is the
+    /// patch's; against the ground it is still the last mover's place carried plus
+    /// its ground velocity (a patch that slid with the ground leaves that); the
+    /// velocities and colour stay as the last mover taught them.
+    pub(super) fn held(&mut self, at: [f64; 2]) {
+        self.centre = at;
+        self.missed = 0;
+        self.held += 1;
     }
 }
 
