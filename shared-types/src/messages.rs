@@ -268,7 +268,7 @@ pub struct PoseNoise {
 /// `entries[1]` the current right one, then `count − 2` past images.
 #[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
 #[repr(C)]
-#[type_name("dualgeo::ObservationSetMsg/v8")]
+#[type_name("dualgeo::ObservationSetMsg/v9")]
 pub struct ObservationSetMsg {
     /// Index of this set among the sets matching published (gaps = sets lost).
     pub set_seq: u64,
@@ -281,9 +281,12 @@ pub struct ObservationSetMsg {
     pub rejected_past: u32,
     /// The stream segment of the pair ([`FrameHeader::segment`]).
     pub segment: u32,
-    /// 1: the two current detections are two vehicles and could not be mended
-    /// (matching's pair check): the set holds the current images only, and no
-    /// estimate may take its rays (the filter publishes its prediction); 0 otherwise.
+    /// [`ObservationSetMsg::REFUSED_TWO_VEHICLES`] (1): the two current detections are
+    /// two vehicles and could not be mended (matching's pair check): the set holds the
+    /// current images only, and no estimate may take its rays (the filter publishes its
+    /// prediction). [`ObservationSetMsg::TARGET_UNSEEN`] (2): a current image has no
+    /// target detection (hidden, say): no entries; geolocation reports the other
+    /// vehicles' tracks, predicted, and no target estimate. 0 otherwise.
     pub refused: u32,
     pub entries: [ObservationEntry; MAX_OBSERVATIONS],
     /// Valid entries of `others`.
@@ -318,6 +321,11 @@ impl Default for ObservationSetMsg {
 }
 
 impl ObservationSetMsg {
+    /// `refused`: the current detections are two vehicles.
+    pub const REFUSED_TWO_VEHICLES: u32 = 1;
+    /// `refused`: a current image has no target detection.
+    pub const TARGET_UNSEEN: u32 = 2;
+
     /// The filled entries (`count` clamped to the array).
     pub fn entries(&self) -> &[ObservationEntry] {
         &self.entries[..(self.count as usize).min(MAX_OBSERVATIONS)]

@@ -11,16 +11,17 @@
 //! tracked vehicle's), `target_in_doubt` (right after a gap in the sets they put it in
 //! doubt); in all three the filter's prediction is published, the set's rays untaken;
 //! `sets_noise_raised` (sets estimated with a UAV's navigation noise raised to what its
-//! pose samples show, [`crate::telemetry_noise`]).
+//! pose samples show, [`crate::telemetry_noise`]); `sets_target_unseen` (a camera did
+//! not find the target: no target estimate, the other vehicles' tracks predicted).
 
-use crate::others_message::{add_tracks, detection_identity};
+use crate::others_message::{add_coasted_tracks, add_tracks, detection_identity};
 use crate::set_message::{coast_message, estimate_message};
 use crate::target_identity::IdentityCheck;
 use crate::telemetry_noise::{MeasuredNoise, NoiseRaise};
 use crate::tracks::{TrackConfig, Tracks};
 use crate::{EstimatorConfig, TemporalEstimator};
 use shared_types::conventions::Uav;
-use shared_types::messages::{EstimateMsg, ObservationSetMsg};
+use shared_types::messages::{EstimateMsg, EstimateStatus, ObservationSetMsg};
 use shared_types::stats::StageStats;
 
 /// The service's state between sets: the configured estimator's filter (`None` for the
@@ -129,6 +130,9 @@ impl Geolocator {
 
     /// The estimate message of one set (its status says when there is none).
     pub fn estimate(&mut self, set: &ObservationSetMsg, stats: &mut StageStats) -> EstimateMsg {
+        if set.refused == ObservationSetMsg::TARGET_UNSEEN {
+            return self.target_unseen(set, stats);
+        }
         self.measure_noise(set, stats);
         let track_config = self.track_config;
         // The other vehicles say whether the target's detections are one of them
@@ -186,6 +190,28 @@ impl Geolocator {
         }
         msg
     }
+
+    /// A pair whose target a camera did not find (hidden): no target estimate, the
+    /// other vehicles' tracks predicted to it. Nothing of the filter, the tracks, the
+    /// measured noise or the identity check's gap changes, so the target's estimates
+    /// are the same as without such pairs.
+    fn target_unseen(&mut self, set: &ObservationSetMsg, stats: &mut StageStats) -> EstimateMsg {
+        stats.count("sets_target_unseen", 1);
+        let mut msg = EstimateMsg {
+            pair_seq: set.pair_seq,
+            capture_ns: set.capture_ns,
+            t_s: set.t_s,
+            status: EstimateStatus::Rejected as u32,
+            velocity_mps: [f64::NAN; 2],
+            velocity_acc_mps: f64::NAN,
+            range_m: f64::NAN,
+            ..Default::default()
+        };
+        if self.track_config.enabled && set.t_s.is_finite() {
+            add_coasted_tracks(set.t_s, &mut msg, &mut self.tracks, stats);
+        }
+        msg
+    }
 }
 
 #[cfg(test)]
@@ -238,6 +264,36 @@ mod tests {
         let after = g.estimate(&refused(11.9), &mut stats);
         assert_eq!(after.status, EstimateStatus::Rejected as u32);
         assert_eq!(stats.counter("rejected.not_started"), not_started + 1);
+    }
+
+    /// A pair without the target (`TARGET_UNSEEN`: no entries) gives no target
+    /// estimate and leaves the filter as it was: the estimates after such pairs are
+    /// those of a run without them.
+    #[test]
+    fn a_pair_without_the_target_changes_no_estimate() {
+        let unseen = |t_s: f64| ObservationSetMsg {
+            refused: ObservationSetMsg::TARGET_UNSEEN,
+            t_s,
+            count: 0,
+            ..Default::default()
+        };
+        let (mut with, mut without) = (geolocator(), geolocator());
+        let mut stats = StageStats::new("t");
+        for k in 0..30 {
+            let t = 9.8 + 0.1 * k as f64;
+            if (10..15).contains(&k) {
+                let m = with.estimate(&unseen(t), &mut stats);
+                assert_eq!(m.status, EstimateStatus::Rejected as u32);
+                assert_eq!(m.track_count, 0);
+                continue;
+            }
+            let a = with.estimate(&set_at(t), &mut stats);
+            let b = without.estimate(&set_at(t), &mut StageStats::new("u"));
+            // Bit for bit (Debug: NaN fields compare unequal).
+            assert_eq!(format!("{a:?}"), format!("{b:?}"), "set {k}");
+        }
+        assert_eq!(stats.counter("sets_target_unseen"), 5);
+        assert_eq!(stats.counter("bad_input"), 0);
     }
 
     /// A set whose pose noise (matching's measurement) shows the left UAV twice as

@@ -172,8 +172,14 @@ fn run() -> Result<()> {
                 geolocator.start_over();
                 stats.count("segments", 1);
             }
+            let unseen = set.refused == ObservationSetMsg::TARGET_UNSEEN;
             let mut msg = geolocator.estimate(set, &mut stats);
             drop(sample);
+            // A pair without the target and without a track to report says nothing:
+            // nothing is published (nor checkpointed, nor timed).
+            if unseen && msg.track_count == 0 {
+                continue;
+            }
             let done = monotonic_ns();
             stats.record("compute", elapsed_us(start, done));
             msg.published_ns = monotonic_ns();

@@ -16,7 +16,7 @@
 
 use crate::shared_bias::{locate_with_biases, OtherFix, SharedBiases};
 use crate::target_identity::{log_likelihood_ratios, IdentityCheck};
-use crate::tracks::{TrackQuality, Tracks};
+use crate::tracks::{TrackQuality, TrackReport, Tracks};
 use crate::TemporalEstimator;
 use crate::{EstimatorConfig, Observation};
 use nalgebra::{Matrix2, Vector2};
@@ -242,6 +242,31 @@ pub fn add_tracks(
     let target =
         (msg.status == EstimateStatus::Ok as u32).then_some([msg.position[0], msg.position[1]]);
     let reports = tracks.update(set.t_s, &fixes, target);
+    put_reports(msg, &reports, tracks, stats);
+}
+
+/// The tracks of a pair whose target neither camera's detector found in both
+/// images (`ObservationSetMsg::TARGET_UNSEEN`: under a bridge, say): no vehicle can be
+/// located without it, so each reported track is its prediction (`Tracks::coasted`,
+/// which changes nothing), and the target's estimate stays rejected.
+pub fn add_coasted_tracks(
+    t_s: f64,
+    msg: &mut EstimateMsg,
+    tracks: &mut Tracks,
+    stats: &mut StageStats,
+) {
+    let reports = tracks.coasted(t_s);
+    put_reports(msg, &reports, tracks, stats);
+}
+
+/// `reports` into `msg` (at most its room), with the tracks' counts since the last
+/// call.
+fn put_reports(
+    msg: &mut EstimateMsg,
+    reports: &[TrackReport],
+    tracks: &mut Tracks,
+    stats: &mut StageStats,
+) {
     let c = tracks.take_counts();
     for (name, n) in [
         ("tracks_confirmed", c.confirmed),

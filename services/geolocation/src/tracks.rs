@@ -708,24 +708,54 @@ impl Tracks {
             .tracks
             .iter()
             .filter(|t| t.id != 0 && t.moved)
-            .map(|t| TrackReport {
-                id: t.id,
-                position: [t.x[0], t.x[1], t.z],
-                // What averaging shrank, and what it cannot (the last fix's persistent
-                // part): a consider covariance (Schmidt), without the states.
-                covariance_xy: t.p.fixed_view::<2, 2>(0, 0) + t.persistent_xy,
-                altitude_std_m: (t.z_var + t.persistent_z_var).sqrt(),
-                velocity_mps: [t.x[2], t.x[3]],
-                quality: if t.updated {
-                    TrackQuality::Tracking
-                } else {
-                    TrackQuality::Coasting
-                },
+            .map(report)
+            .collect();
+        out.sort_by_key(|r| r.id);
+        out.truncate(c.max_tracks);
+        out
+    }
+
+    /// The reported tracks predicted to `t_s`, for a pair that has no fix to give them
+    /// (the target unseen: every vehicle is located relative to it). Nothing changes:
+    /// the next [`Tracks::update`] predicts from the tracks' own last times, as if this
+    /// pair had not been, so the target's estimates and the tracks' later states are
+    /// the same with or without such pairs. A track silent for `delete_after_s` is left
+    /// out (its next update deletes it; one grown wider than `delete_sigma_m` over the
+    /// gap is still reported, with that covariance: a fix may narrow it again).
+    pub fn coasted(&self, t_s: f64) -> Vec<TrackReport> {
+        let c = self.config;
+        let mut out: Vec<TrackReport> = self
+            .tracks
+            .iter()
+            .filter(|t| t.id != 0 && t.moved)
+            .filter_map(|t| {
+                let mut t = t.clone();
+                predict(&mut t, t_s, c.accel_sigma_mps2);
+                t.updated = false;
+                (t_s - t.last_fix_s <= c.delete_after_s).then(|| report(&t))
             })
             .collect();
         out.sort_by_key(|r| r.id);
         out.truncate(c.max_tracks);
         out
+    }
+}
+
+/// What a track says of its vehicle now.
+fn report(t: &Track) -> TrackReport {
+    TrackReport {
+        id: t.id,
+        position: [t.x[0], t.x[1], t.z],
+        // What averaging shrank, and what it cannot (the last fix's persistent part): a
+        // consider covariance (Schmidt), without the states.
+        covariance_xy: t.p.fixed_view::<2, 2>(0, 0) + t.persistent_xy,
+        altitude_std_m: (t.z_var + t.persistent_z_var).sqrt(),
+        velocity_mps: [t.x[2], t.x[3]],
+        quality: if t.updated {
+            TrackQuality::Tracking
+        } else {
+            TrackQuality::Coasting
+        },
     }
 }
 
@@ -952,6 +982,39 @@ mod tests {
         assert_eq!(ids_seen.into_iter().collect::<Vec<_>>(), vec![1, 2]);
         let c = tracks.take_counts();
         assert_eq!((c.confirmed, c.deleted, c.reacquired), (2, 0, 2));
+    }
+
+    /// While the target is hidden no pair is located and no update comes: the
+    /// reported tracks are predicted to each such pair (`coasted`), near their
+    /// vehicles and marked coasting, and the tracks afterwards are exactly those of a
+    /// run that never asked.
+    #[test]
+    fn coasted_reports_predict_the_tracks_and_change_nothing() {
+        let mut asked = Tracks::new(TrackConfig::default()).unwrap();
+        let mut not_asked = Tracks::new(TrackConfig::default()).unwrap();
+        for k in 0..150 {
+            let t = k as f64 * DT;
+            let y = 10.0 * t;
+            if (60..100).contains(&k) {
+                let out = asked.coasted(t);
+                assert_eq!(out.len(), 2, "pair {k}");
+                for r in &out {
+                    let x = if r.id == 1 { 0.0 } else { 5.0 };
+                    let dy = if r.id == 1 { 0.0 } else { 1.0 };
+                    assert!((r.position[0] - x).abs() < 1.0, "pair {k}: {r:?}");
+                    assert!((r.position[1] - y - dy).abs() < 2.0, "pair {k}: {r:?}");
+                    assert_eq!(r.quality, TrackQuality::Coasting);
+                }
+                continue;
+            }
+            let fixes = [fix(0.0, y), fix(5.0, y + 1.0)];
+            let a = asked.update(t, &fixes, None);
+            let b = not_asked.update(t, &fixes, None);
+            assert_eq!(a, b, "pair {k}");
+        }
+        assert_eq!(asked.snapshot(), not_asked.snapshot());
+        // Past `delete_after_s` without a fix a track is not reported.
+        assert!(asked.coasted(150.0 * DT + 3.1).is_empty());
     }
 
     /// A vehicle's fixes state σ 2 m, scatter far less (the learnt scale falls to its

@@ -13,7 +13,7 @@ use crate::chain::{MatchOutcome, MatchedSet, OthersOutcome};
 use crate::frame::{ChainCounts, FrameInput, FrameMeta, Others};
 use crate::frame_tracking::{FrameTracker, Observed, TrackReport};
 use crate::ring_store::RingStore;
-use crate::set_message::{matched_set, refused_set, SetHeader};
+use crate::set_message::{matched_set, refused_set, unseen_set, SetHeader};
 use crate::{ChainTiming, MatchingConfig, VisionChain};
 use anyhow::Result;
 use detection::frame_view::frame_mat;
@@ -410,7 +410,7 @@ impl Intake {
         let set = match outcome {
             MatchOutcome::NoDetection => {
                 self.stats.count("no_detection", 1);
-                None
+                Some(unseen_set(&header))
             }
             MatchOutcome::NotEnoughHistory { .. } => {
                 self.stats.count("warming_up", 1);

@@ -26,7 +26,9 @@
 //! `refresh` (the refresh thread's work per job), `refresh_wait` (a pair waiting for a
 //! refresh at `--rate max`); `refresh_late` counts frames from a refresh's frame to
 //! the one it landed on. Counters: `frames`, `pairs`, `sets`,
-//! `frames_lost` (sequence gaps), `frames_dropped`, `no_detection`, `warming_up`,
+//! `frames_lost` (sequence gaps), `frames_dropped`, `no_detection` (a pair without the
+//! target in a view: its set is published marked `TARGET_UNSEEN`, for the other
+//! vehicles' tracks), `warming_up`,
 //! `past_rejected.<reason>` (`awaiting_refresh`: nothing tracked to that past image
 //! yet), `refreshes`, `refresh_not_followed`, `refresh_failed`, `essential_fallback`
 //! (past images whose F came from the 5-point E because the dominant plane was not

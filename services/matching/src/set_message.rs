@@ -46,9 +46,16 @@ impl SetHeader {
 /// A pair refused as two vehicles (`chain::target_pair`): the current images only,
 /// marked `refused` (geolocation publishes the filter's prediction for it).
 pub fn refused_set(header: &SetHeader, current: &[Observation; 2]) -> ObservationSetMsg {
-    let mut msg = header.message(1);
+    let mut msg = header.message(ObservationSetMsg::REFUSED_TWO_VEHICLES);
     fill_entries(&mut msg, current.iter().zip(header.frames));
     msg
+}
+
+/// A pair without the target's detection in one of its images: no entries, marked
+/// `TARGET_UNSEEN` (geolocation reports the other vehicles' tracks for it; without it
+/// they went unreported for as long as the target was hidden).
+pub fn unseen_set(header: &SetHeader) -> ObservationSetMsg {
+    header.message(ObservationSetMsg::TARGET_UNSEEN)
 }
 
 /// A matched pair: its current and past observations and the other vehicles paired
