@@ -176,8 +176,10 @@ fn run() -> Result<()> {
             let mut msg = geolocator.estimate(set, &mut stats);
             drop(sample);
             // A pair without the target and without a track to report says nothing:
-            // nothing is published (nor checkpointed, nor timed).
+            // nothing is published (nor checkpointed, nor timed). It was seen all the
+            // same: a new segment it started is not started again by the next set.
             if unseen && msg.track_count == 0 {
+                last = Some((msg.pair_seq, msg.t_s, set_segment));
                 continue;
             }
             let done = monotonic_ns();
