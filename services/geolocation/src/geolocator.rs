@@ -15,7 +15,7 @@
 //! not find the target: no target estimate, the other vehicles' tracks predicted).
 
 use crate::others_message::{add_coasted_tracks, add_tracks, detection_identity};
-use crate::set_message::{coast_message, estimate_message};
+use crate::set_message::{coast_message, estimate_message, unestimated};
 use crate::target_identity::IdentityCheck;
 use crate::telemetry_noise::{MeasuredNoise, NoiseRaise};
 use crate::tracks::{TrackConfig, Tracks};
@@ -198,14 +198,8 @@ impl Geolocator {
     fn target_unseen(&mut self, set: &ObservationSetMsg, stats: &mut StageStats) -> EstimateMsg {
         stats.count("sets_target_unseen", 1);
         let mut msg = EstimateMsg {
-            pair_seq: set.pair_seq,
-            capture_ns: set.capture_ns,
-            t_s: set.t_s,
             status: EstimateStatus::Rejected as u32,
-            velocity_mps: [f64::NAN; 2],
-            velocity_acc_mps: f64::NAN,
-            range_m: f64::NAN,
-            ..Default::default()
+            ..unestimated(set)
         };
         if self.track_config.enabled && set.t_s.is_finite() {
             add_coasted_tracks(set.t_s, &mut msg, &mut self.tracks, stats);

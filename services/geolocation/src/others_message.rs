@@ -245,8 +245,8 @@ pub fn add_tracks(
     put_reports(msg, &reports, tracks, stats);
 }
 
-/// The tracks of a pair whose target neither camera's detector found in both
-/// images (`ObservationSetMsg::TARGET_UNSEEN`: under a bridge, say): no vehicle can be
+/// The tracks of a pair whose target a camera's detector did not find
+/// (`ObservationSetMsg::TARGET_UNSEEN`: under a bridge, say): no vehicle can be
 /// located without it, so each reported track is its prediction (`Tracks::coasted`,
 /// which changes nothing), and the target's estimate stays rejected.
 pub fn add_coasted_tracks(

@@ -68,6 +68,20 @@ pub fn finite(msg: &EstimateMsg) -> bool {
         && msg.altitude_std_error_m.is_finite()
 }
 
+/// The estimate message of `set` before anything is estimated: the set's pair and
+/// times, status `Ok`, the velocity and range unknown (NaN until estimated).
+pub fn unestimated(set: &ObservationSetMsg) -> EstimateMsg {
+    EstimateMsg {
+        pair_seq: set.pair_seq,
+        capture_ns: set.capture_ns,
+        t_s: set.t_s,
+        velocity_mps: [f64::NAN; 2],
+        velocity_acc_mps: f64::NAN,
+        range_m: f64::NAN,
+        ..Default::default()
+    }
+}
+
 /// The estimate of one observation set, or why there is none (the status, and a
 /// counter in `stats`). A non-finite result is turned into `rejected.non_finite`.
 pub fn estimate_message(
@@ -123,15 +137,7 @@ fn estimate_unchecked(
     stats: &mut StageStats,
     coast: bool,
 ) -> EstimateMsg {
-    let mut msg = EstimateMsg {
-        pair_seq: set.pair_seq,
-        capture_ns: set.capture_ns,
-        t_s: set.t_s,
-        velocity_mps: [f64::NAN; 2],
-        velocity_acc_mps: f64::NAN,
-        range_m: f64::NAN,
-        ..Default::default()
-    };
+    let mut msg = unestimated(set);
     if !set.t_s.is_finite() {
         stats.count("bad_input", 1);
         tracing::warn!(pair = set.pair_seq, "observation set time is not finite");

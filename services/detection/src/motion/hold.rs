@@ -8,8 +8,10 @@
 //! So each frame the target is found as a mover, its patch (the outline's box, colour)
 //! is cut from that frame; on a frame without the mover the patch is looked for by
 //! normalised cross-correlation ([`TemplateTrack`]) around where it was, and taken
-//! when it correlates at `hold_min_score` or better, lies within `track_radius_px` of
-//! the track's predictions and inside the geolocation filter's gate. The patch is not
+//! when it correlates at `hold_min_score` or better, lies within [`HOLD_RADIUS_PX`] of
+//! the track's place against the ground and inside the geolocation filter's gate. The
+//! patch is only cut from a mover where the track expected it ([`LEARN_RADIUS_PX`]) and
+//! with the contrast to correlate ([`MIN_PATCH_SD`]). The patch is not
 //! re-cut from a held frame (a patch re-learned from its own matches drifts off the
 //! car), so a hold lasts at most `hold_frames` frames after the last mover.
 
@@ -27,12 +29,12 @@ const SEARCH_PX: i32 = 16;
 /// ground's motion and moved on at the track's own ground velocity, should be now,
 /// pixels. A patch that slid along the road (a lane line, the car's edge against
 /// concrete) moves with the ground, not with the car, and leaves this.
-pub(super) const HOLD_RADIUS_PX: f64 = 6.0;
+const HOLD_RADIUS_PX: f64 = 6.0;
 
 /// A mover is learnt from only when it is where the track expected it, within this
 /// many pixels of a prediction, with the previous frame found too (a pick after a gap,
 /// or a jump, may be another car: holding it would keep the wrong one).
-pub(super) const LEARN_RADIUS_PX: f64 = 6.0;
+const LEARN_RADIUS_PX: f64 = 6.0;
 
 /// A patch whose grey levels spread less than this (standard deviation, the largest
 /// colour channel's) has no shape to correlate: a uniform roof matches any edge.
