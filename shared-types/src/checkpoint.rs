@@ -17,8 +17,9 @@ const MAGIC: &[u8; 4] = b"DGCK";
 /// Bumped whenever a checkpointed type changes shape (2: the geolocation checkpoint
 /// holds the other vehicles' tracks; 3: geolocation's and matching's hold the stream
 /// segment; 4: each track holds the persistent part of its error; 5: the tracks' colours
-/// and the deleted tracks remembered for re-identification).
-pub const VERSION: u32 = 5;
+/// and the deleted tracks remembered for re-identification; 6: each track's own noise
+/// scale).
+pub const VERSION: u32 = 6;
 const HEADER: usize = 12;
 
 #[derive(Debug, thiserror::Error)]
