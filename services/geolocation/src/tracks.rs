@@ -23,8 +23,9 @@
 //!
 //! **Restart**: [`Tracks::snapshot`] and [`Tracks::restore`] carry every track (with its
 //! colour and its own noise scale), the deleted tracks still remembered for
-//! re-identification, the next id and the noise scale across a restart of the geolocation service (its checkpoint): ids
-//! stay stable, also for a vehicle hidden when the service restarted.
+//! re-identification, the next id and the noise scale learnt over every track across a
+//! restart of the geolocation service (its checkpoint): ids stay stable, also for a
+//! vehicle hidden when the service restarted.
 //!
 //! Not yet: a fix's error is taken as independent from pair to pair although the
 //! shared biases' error is not.
