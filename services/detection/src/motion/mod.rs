@@ -23,10 +23,10 @@
 //! A vehicle that looks like the ground it is on drops out of the differences for a
 //! few frames: its patch from the last frame it moved in holds it ([`hold`], at most
 //! `hold_frames` frames). A vehicle that stops or hides disappears from the
-//! differences: the track then coasts (in the image and carried by the ground, at its velocities for at most 8
-//! frames); after `coast_frames` frames its search radius grows, up to 3×, and after
-//! four times that it is dropped and the next mover near where it should be is taken
-//! for it. When the ground's motion is lost (the camera jumped beyond KLT and the
+//! differences: the track then coasts (in the image and carried by the ground, at its
+//! velocities for at most 8 frames); after `coast_frames` frames its search radius
+//! grows, up to 3×, and after four times that it is dropped and the next mover near
+//! where it should be is taken for it. When the ground's motion is lost (the camera jumped beyond KLT and the
 //! phase correlation), the history starts again and the track is looked for within
 //! `acquire_radius_px`.
 
