@@ -61,8 +61,8 @@ struct Args {
     /// `[detection.motion]` keys for the motion rows, TOML (e.g. `threshold = 25`).
     #[arg(long, default_value = "")]
     motion: String,
-    /// Print, per frame of the left camera, the designated motion detector's movers
-    /// against the truth pixel (stderr).
+    /// Print, per frame and camera (`camera 0` left, `camera 1` right), the designated
+    /// motion detector's movers against the truth pixel (stderr).
     #[arg(long)]
     trace: bool,
     /// Seeds per preset (0: the preset itself; more start the route elsewhere and
@@ -293,11 +293,13 @@ fn fly(
                 let cost = ms(start);
                 // This camera's counts for this frame alone.
                 let c = designated.take_counts();
-                if args.trace && camera == 0 {
+                if args.trace {
                     if c.no_ground > 0 {
-                        eprintln!("frame {k}: the ground's motion was not measured");
+                        eprintln!(
+                            "camera {camera} frame {k}: the ground's motion was not measured"
+                        );
                     }
-                    trace(k, truth, found, c.held > 0, &designated);
+                    trace(camera, k, truth, found, c.held > 0, &designated);
                 }
                 if k >= warm_up {
                     t.designated.see(truth, found, args.hit_px, cost);
@@ -317,8 +319,9 @@ fn fly(
     Ok(())
 }
 
-/// One line per frame of the designated motion detector's left camera (`--trace`).
+/// One line per frame and camera of the designated motion detector (`--trace`).
 fn trace(
+    camera: usize,
     k: u64,
     truth: Option<[f64; 2]>,
     found: Option<Detection>,
@@ -328,9 +331,9 @@ fn trace(
     let near = |c: [f64; 2]| truth.map_or(f64::NAN, |t| (c[0] - t[0]).hypot(c[1] - t[1]));
     let round = |p: [f64; 2]| [p[0].round(), p[1].round()];
     eprintln!(
-        "frame {k}: truth {:?} track (image, ground, missed) {:?} found at {:.1} px {:?}{}; movers (distance, area) {:?}",
+        "camera {camera} frame {k}: truth {:?} track (image, ground, missed) {:?} found at {:.1} px {:?}{}; movers (distance, area) {:?}",
         truth.map(round),
-        d.track_state(0).map(|([a, b], n)| (round(a), round(b), n)),
+        d.track_state(camera).map(|([a, b], n)| (round(a), round(b), n)),
         found.map_or(f64::NAN, |f| near(f.centre)),
         found.zip(truth).map(|(f, t)| [
             (f.centre[0] - t[0]) as f32,
