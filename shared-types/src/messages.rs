@@ -186,11 +186,13 @@ impl DetectionMsg {
 /// One image of an observation set: the measured pose and the target's pixel.
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
 #[repr(C)]
-#[type_name("dualgeo::ObservationEntry/v3")]
+#[type_name("dualgeo::ObservationEntry/v4")]
 pub struct ObservationEntry {
     /// 0 = left, 1 = right.
     pub uav: u8,
-    pub _reserved: [u8; 7],
+    /// Bit s set: `rotation[s]` holds a measurement (past images only).
+    pub rotation_valid: u8,
+    pub _reserved: [u8; 6],
     /// The image's frame sequence number (with `uav`, its identity across sets: the
     /// temporal estimator recognises a reused keyframe by it).
     pub frame_seq: u64,
@@ -202,6 +204,18 @@ pub struct ObservationEntry {
     pub pixel: [f64; 2],
     /// fx, fy, cx, cy.
     pub intrinsics: [f64; 4],
+    /// A past image's rotation from the current left (`[0]`) and right (`[1]`) camera,
+    /// as the images measure it (matching's ground-plane homography, decomposed):
+    /// `X_past = R X_current` in camera axes, as a rotation vector (axis × angle,
+    /// radians). Valid where bit s of `rotation_valid` is set.
+    pub rotation: [[f64; 3]; 2],
+}
+
+impl ObservationEntry {
+    /// `rotation[side]`, if measured.
+    pub fn rotation_from(&self, side: usize) -> Option<[f64; 3]> {
+        (side < 2 && self.rotation_valid & (1 << side) != 0).then(|| self.rotation[side])
+    }
 }
 
 /// Most images an observation set carries (N ≤ 16 per UAV).
@@ -268,7 +282,7 @@ pub struct PoseNoise {
 /// `entries[1]` the current right one, then `count − 2` past images.
 #[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
 #[repr(C)]
-#[type_name("dualgeo::ObservationSetMsg/v9")]
+#[type_name("dualgeo::ObservationSetMsg/v10")]
 pub struct ObservationSetMsg {
     /// Index of this set among the sets matching published (gaps = sets lost).
     pub set_seq: u64,
@@ -480,12 +494,12 @@ mod tests {
             std::mem::size_of::<EstimateMsg>(),
             264 + 8 + 88 * MAX_TRACKS
         );
-        assert_eq!(std::mem::size_of::<ObservationEntry>(), 120);
+        assert_eq!(std::mem::size_of::<ObservationEntry>(), 168);
         assert_eq!(std::mem::size_of::<OtherTarget>(), 32 + 16 * 30 + 16);
         assert_eq!(std::mem::size_of::<PoseNoise>(), 6 * 8 + 8 + 4 + 4);
         assert_eq!(
             std::mem::size_of::<ObservationSetMsg>(),
-            56 + 120 * MAX_OBSERVATIONS + 8 + 528 * MAX_OTHER_TARGETS + 2 * 64
+            56 + 168 * MAX_OBSERVATIONS + 8 + 528 * MAX_OTHER_TARGETS + 2 * 64
         );
         let set = ObservationSetMsg {
             count: 99,

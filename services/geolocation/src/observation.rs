@@ -1,7 +1,7 @@
 //! The estimator's input: one image's measured navigation state and target pixel.
 
 use crate::EstimatorError;
-use nalgebra::{Point3, Vector2};
+use nalgebra::{Point3, Vector2, Vector3};
 use shared_types::conventions::{Attitude, Intrinsics, Uav};
 use shared_types::messages::{ObservationEntry, PoseSample};
 
@@ -18,6 +18,11 @@ pub struct PastImage {
     /// Capture time, seconds, on the clock of the set's `t_s`.
     pub t_s: f64,
     pub observation: Observation,
+    /// Its camera's rotation from the current left (`[0]`) and right (`[1]`) camera as
+    /// the images measure it (`X_past = R X_current`, camera axes, a rotation vector in
+    /// radians): the temporal filter's relative-rotation measurement. None where
+    /// matching measured none.
+    pub rotation_from: [Option<Vector3<f64>>; 2],
 }
 
 /// One image `g_k`: the measured state γ of its UAV when it was taken and the pixel of

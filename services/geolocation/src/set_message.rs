@@ -10,7 +10,7 @@ use crate::{
     TemporalEstimator,
 };
 use serde::{Deserialize, Serialize};
-use shared_types::messages::{EstimateMsg, EstimateStatus, ObservationSetMsg};
+use shared_types::messages::{EstimateMsg, EstimateStatus, ObservationEntry, ObservationSetMsg};
 use shared_types::stats::StageStats;
 
 /// The kind tag of the service's checkpoint (`shared_types::checkpoint`).
@@ -126,6 +126,27 @@ fn checked(mut msg: EstimateMsg, config: &EstimatorConfig, stats: &mut StageStat
 }
 
 /// √(σ_x² + σ_y²) of an estimate, m.
+/// The set's past images (`entries` after the current pair, with their decoded
+/// observations) as the temporal filter takes them. A rotation that is not finite is
+/// no measurement: it is dropped, never passed on.
+fn past_images(entries: &[ObservationEntry], observations: &[Observation]) -> Vec<PastImage> {
+    entries
+        .iter()
+        .zip(observations)
+        .map(|(entry, o)| PastImage {
+            id: (o.uav, entry.frame_seq),
+            t_s: entry.t_s,
+            observation: *o,
+            rotation_from: [0, 1].map(|side| {
+                entry
+                    .rotation_from(side)
+                    .map(nalgebra::Vector3::from)
+                    .filter(|v| v.iter().all(|x| x.is_finite()))
+            }),
+        })
+        .collect()
+}
+
 pub fn h_acc(msg: &EstimateMsg) -> f64 {
     (msg.covariance[0] + msg.covariance[5]).max(0.0).sqrt()
 }
@@ -169,15 +190,7 @@ fn estimate_unchecked(
             return msg;
         }
     };
-    let past: Vec<PastImage> = set.entries()[2..]
-        .iter()
-        .zip(&observations[2..])
-        .map(|(entry, o)| PastImage {
-            id: (o.uav, entry.frame_seq),
-            t_s: entry.t_s,
-            observation: *o,
-        })
-        .collect();
+    let past = past_images(&set.entries()[2..], &observations[2..]);
     let current = [&observations[0], &observations[1]];
     let result = if coast {
         temporal
@@ -374,6 +387,33 @@ pub(crate) mod tests {
 
     /// A set of a later segment starts the filter over: the next set is not
     /// estimated from the old world (the filter needs its agreeing starts again).
+    #[test]
+    fn a_past_images_rotations_are_decoded_and_a_nan_one_dropped() {
+        use shared_types::conventions::Uav;
+        let o = |uav| Observation {
+            uav,
+            position: nalgebra::Point3::new(0.0, 0.0, 100.0),
+            attitude: shared_types::conventions::Attitude::new(0.0, 0.0, 0.0),
+            pixel: nalgebra::Vector2::new(320.0, 240.0),
+            intrinsics: shared_types::conventions::Intrinsics::new(554.0, 554.0, 319.5, 239.5),
+        };
+        let mut entry = o(Uav::Right).to_entry();
+        entry.frame_seq = 7;
+        entry.rotation = [[0.01, -0.02, 0.3], [f64::NAN, 0.0, 0.0]];
+        entry.rotation_valid = 0b11;
+        let past = past_images(&[entry], &[o(Uav::Right)]);
+        assert_eq!(past[0].id, (Uav::Right, 7));
+        assert_eq!(
+            past[0].rotation_from,
+            [Some(nalgebra::Vector3::new(0.01, -0.02, 0.3)), None]
+        );
+        entry.rotation_valid = 0;
+        assert_eq!(
+            past_images(&[entry], &[o(Uav::Right)])[0].rotation_from,
+            [None; 2]
+        );
+    }
+
     #[test]
     fn a_new_segment_starts_the_filter_over() {
         assert_eq!(segment_step(0, None), SegmentStep::Same);

@@ -172,6 +172,7 @@ mod tests {
                             id: (ob.uav, *next_id),
                             t_s: t,
                             observation: *ob,
+                            rotation_from: [None; 2],
                         }
                     })
                     .collect();

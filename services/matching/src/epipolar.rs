@@ -74,6 +74,10 @@ pub struct PairGeometry {
     /// For `ground_plane`: the dominant plane's homography (current → past pixels),
     /// the prior for guided matching with the next current frame.
     pub homography: Option<Matrix3<f64>>,
+    /// For a level plane's F: the rotation of its decomposition, `X_past = R
+    /// X_current` in camera axes (the images' own measure of it; the estimator's
+    /// relative-rotation measurement).
+    pub rotation: Option<Matrix3<f64>>,
 }
 
 /// Ratio-tested Hamming matches from `current` to `past`, as point pairs. `scratch`
@@ -172,7 +176,7 @@ pub fn estimate_fundamental_masked(
         return Err(MatchReject::TooFewMatches { matches });
     }
     let fail = |_| MatchReject::FundamentalFailed;
-    let (f, model, homography) = match config.fundamental {
+    let (f, model, homography, rotation) = match config.fundamental {
         FundamentalMethod::Ransac8Point => {
             let f = opencv::calib3d::find_fundamental_mat(
                 current,
@@ -184,26 +188,28 @@ pub fn estimate_fundamental_masked(
                 mask,
             )
             .map_err(fail)?;
-            (single_solution(&f)?, None, None)
+            (single_solution(&f)?, None, None, None)
         }
         FundamentalMethod::Magsac => {
             let params = usac_params(config, config.ransac_threshold_px).map_err(fail)?;
             let f = opencv::calib3d::find_fundamental_mat_2(current, past, mask, params)
                 .map_err(fail)?;
-            (single_solution(&f)?, None, None)
+            (single_solution(&f)?, None, None, None)
         }
         FundamentalMethod::Essential => (
             essential_as_fundamental(current, past, intrinsics, config, mask)?,
             None,
             None,
+            None,
         ),
         FundamentalMethod::GroundPlane => {
-            let (f, model, h) =
+            let (f, model, h, rotation) =
                 ground_plane_fundamental(current, past, intrinsics, up, config, mask)?;
             (
                 f,
                 Some(model),
                 (model == PlaneModel::GroundPlane).then_some(h),
+                rotation,
             )
         }
     };
@@ -220,6 +226,7 @@ pub fn estimate_fundamental_masked(
         inliers,
         model,
         homography,
+        rotation,
     })
 }
 
@@ -234,7 +241,9 @@ fn single_solution(f: &cv::Mat) -> Result<Matrix3<f64>, MatchReject> {
 
 /// The `ground_plane` method (see [`crate::ground_plane`]): the level plane's
 /// homography, decomposed; the 5-point E when the dominant plane is not level. `mask`
-/// marks the inliers of whichever model was used.
+/// marks the inliers of whichever model was used. The level plane's rotation comes
+/// with it (none from the fallback).
+#[allow(clippy::type_complexity)]
 fn ground_plane_fundamental(
     current: &cv::Vector<cv::Point2f>,
     past: &cv::Vector<cv::Point2f>,
@@ -242,7 +251,7 @@ fn ground_plane_fundamental(
     up: &Vector3<f64>,
     config: &MatchingConfig,
     mask: &mut cv::Mat,
-) -> Result<(Matrix3<f64>, PlaneModel, Matrix3<f64>), MatchReject> {
+) -> Result<(Matrix3<f64>, PlaneModel, Matrix3<f64>, Option<Matrix3<f64>>), MatchReject> {
     let fail = |_| MatchReject::FundamentalFailed;
     let (kc, kp) = (k_current.matrix(), k_past.matrix());
     let h = dominant_homography(current, past, config, mask)
@@ -256,11 +265,13 @@ fn ground_plane_fundamental(
                 .ok_or(MatchReject::FundamentalFailed)?,
             PlaneModel::GroundPlane,
             h,
+            Some(m.rotation),
         )),
         _ => Ok((
             essential_as_fundamental(current, past, (k_current, k_past), config, mask)?,
             PlaneModel::EssentialFallback,
             h,
+            None,
         )),
     }
 }

@@ -80,6 +80,19 @@ pub fn matched_set(
             .chain(&matched.past_observations)
             .zip(frames),
     );
+    // Each past image's rotation from the current cameras, as the images measure it.
+    let count = msg.count as usize;
+    for (entry, p) in msg.entries[2..count.max(2)].iter_mut().zip(&matched.past) {
+        for (side, r) in p.rotations.iter().enumerate() {
+            if let Some(r) = r {
+                let v = nalgebra::Rotation3::from_matrix(r).scaled_axis();
+                if v.iter().all(|x| x.is_finite()) {
+                    entry.rotation[side] = [v.x, v.y, v.z];
+                    entry.rotation_valid |= 1 << side;
+                }
+            }
+        }
+    }
     msg
 }
 
@@ -177,6 +190,7 @@ mod tests {
             inliers: [0; 2],
             fundamental: [Matrix3::identity(); 2],
             models: [None; 2],
+            rotations: [None; 2],
             guided: [false; 2],
             chained: [false; 2],
         }
@@ -198,9 +212,14 @@ mod tests {
 
     #[test]
     fn a_matched_set_carries_every_image_and_the_other_vehicles() {
+        // The right UAV's past image carries its rotation from the current left camera
+        // (the images' measure of it), and none from the right one.
+        let turned = nalgebra::Rotation3::from_euler_angles(0.01, -0.02, 0.3);
+        let mut right = past(Uav::Right, 4);
+        right.rotations[0] = Some(turned.into_inner());
         let matched = matched(vec![
             (observation(Uav::Left, 200.0), past(Uav::Left, 3)),
-            (observation(Uav::Right, 210.0), past(Uav::Right, 4)),
+            (observation(Uav::Right, 210.0), right),
         ]);
         let others = OthersOutcome {
             targets: vec![OtherPixels {
@@ -221,6 +240,12 @@ mod tests {
             vec![(9, 1.5), (9, 1.51), (3, 0.3), (4, 0.4)]
         );
         assert_eq!(e[2].pixel, [200.0, 240.0]);
+        assert_eq!((e[2].rotation_from(0), e[2].rotation_from(1)), (None, None));
+        let v = e[3]
+            .rotation_from(0)
+            .expect("the rotation from the left camera");
+        assert!((nalgebra::Vector3::from(v) - turned.scaled_axis()).norm() < 1e-12);
+        assert_eq!(e[3].rotation_from(1), None);
         assert_eq!((msg.other_count, msg.others_dropped), (1, 0));
         let o = msg.others()[0];
         assert_eq!(o.current, [[1.0, 2.0], [3.0, 4.0]]);

@@ -269,6 +269,8 @@ pub fn run(
                 id: (i.uav, i.seq),
                 t_s: i.t_s,
                 observation: observation(config, step, i).0,
+                // The paper's tables: the rays alone, as the paper has them.
+                rotation_from: [None; 2],
             })
             .collect();
         let past: Vec<Observation> = past_ids.iter().map(|image| image.observation).collect();

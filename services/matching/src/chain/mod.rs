@@ -98,6 +98,9 @@ pub struct PastMatch {
     pub fundamental: [nalgebra::Matrix3<f64>; 2],
     /// Which model gave each F (`ground_plane` method only).
     pub models: [Option<PlaneModel>; 2],
+    /// The rotation from each current camera (left, right) to this past one, from its
+    /// level plane's decomposition (`PairGeometry::rotation`).
+    pub rotations: [Option<nalgebra::Matrix3<f64>>; 2],
     /// Whether each side was matched guided by a prior (else brute force).
     pub guided: [bool; 2],
     /// Whether each side's homography was carried by frame-to-frame tracking from an

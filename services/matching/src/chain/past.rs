@@ -150,6 +150,7 @@ pub(super) fn match_past(
         inliers: [gl.inliers, gr.inliers],
         fundamental: [gl.f, gr.f],
         models: [gl.model, gr.model],
+        rotations: [gl.rotation, gr.rotation],
         guided,
         chained,
     });
