@@ -127,10 +127,15 @@ fn checked(mut msg: EstimateMsg, config: &EstimatorConfig, stats: &mut StageStat
 
 /// √(σ_x² + σ_y²) of an estimate, m.
 /// The set's past images (`entries` after the current pair, with their decoded
-/// observations) as the temporal filter takes them. A rotation that is not finite is
-/// no measurement: it is dropped, never passed on.
-fn past_images(entries: &[ObservationEntry], observations: &[Observation]) -> Vec<PastImage> {
-    entries
+/// observations) as the temporal filter takes them, and how many rotations were
+/// refused. A rotation vector that is not finite or turns more than π is no
+/// measurement (matching writes `log R`, at most π): it is dropped, never passed on.
+fn past_images(
+    entries: &[ObservationEntry],
+    observations: &[Observation],
+) -> (Vec<PastImage>, usize) {
+    let mut refused = 0;
+    let past = entries
         .iter()
         .zip(observations)
         .map(|(entry, o)| PastImage {
@@ -138,13 +143,18 @@ fn past_images(entries: &[ObservationEntry], observations: &[Observation]) -> Ve
             t_s: entry.t_s,
             observation: *o,
             rotation_from: [0, 1].map(|side| {
-                entry
-                    .rotation_from(side)
-                    .map(nalgebra::Vector3::from)
-                    .filter(|v| v.iter().all(|x| x.is_finite()))
+                let v = entry.rotation_from(side).map(nalgebra::Vector3::from)?;
+                let angle = v.norm();
+                if angle.is_finite() && angle <= std::f64::consts::PI + 1e-9 {
+                    Some(v)
+                } else {
+                    refused += 1;
+                    None
+                }
             }),
         })
-        .collect()
+        .collect();
+    (past, refused)
 }
 
 pub fn h_acc(msg: &EstimateMsg) -> f64 {
@@ -190,7 +200,15 @@ fn estimate_unchecked(
             return msg;
         }
     };
-    let past = past_images(&set.entries()[2..], &observations[2..]);
+    let (past, refused_rotations) = past_images(&set.entries()[2..], &observations[2..]);
+    if refused_rotations > 0 {
+        stats.count("bad_rotation", refused_rotations as u64);
+        tracing::warn!(
+            pair = set.pair_seq,
+            refused_rotations,
+            "past images' rotations not finite or beyond π: not taken"
+        );
+    }
     let current = [&observations[0], &observations[1]];
     let result = if coast {
         temporal
@@ -388,7 +406,7 @@ pub(crate) mod tests {
     /// A set of a later segment starts the filter over: the next set is not
     /// estimated from the old world (the filter needs its agreeing starts again).
     #[test]
-    fn a_past_images_rotations_are_decoded_and_a_nan_one_dropped() {
+    fn a_past_images_rotations_are_decoded_and_bad_ones_refused() {
         use shared_types::conventions::Uav;
         let o = |uav| Observation {
             uav,
@@ -401,17 +419,19 @@ pub(crate) mod tests {
         entry.frame_seq = 7;
         entry.rotation = [[0.01, -0.02, 0.3], [f64::NAN, 0.0, 0.0]];
         entry.rotation_valid = 0b11;
-        let past = past_images(&[entry], &[o(Uav::Right)]);
+        let (past, refused) = past_images(&[entry], &[o(Uav::Right)]);
         assert_eq!(past[0].id, (Uav::Right, 7));
         assert_eq!(
             past[0].rotation_from,
             [Some(nalgebra::Vector3::new(0.01, -0.02, 0.3)), None]
         );
+        assert_eq!(refused, 1);
+        // Finite but huge (its norm overflows), or beyond π: refused too.
+        entry.rotation = [[1e300, 1e300, 0.0], [4.0, 0.0, 0.0]];
+        assert_eq!(past_images(&[entry], &[o(Uav::Right)]).1, 2);
         entry.rotation_valid = 0;
-        assert_eq!(
-            past_images(&[entry], &[o(Uav::Right)])[0].rotation_from,
-            [None; 2]
-        );
+        let (past, refused) = past_images(&[entry], &[o(Uav::Right)]);
+        assert_eq!((past[0].rotation_from, refused), ([None; 2], 0));
     }
 
     #[test]

@@ -1390,6 +1390,9 @@ impl TemporalEstimator {
         let mut rotations_accepted = Vec::new();
         for (i, m) in rotations.iter().enumerate() {
             let (r, h) = linearise_rotation(m, &rays, &s);
+            if !r.iter().chain(h.iter()).all(|v| v.is_finite()) {
+                continue;
+            }
             let sk = &h * &p * h.transpose() + rotation_noise(m);
             let Some(chol) = sk.cholesky() else {
                 continue;
@@ -1611,7 +1614,7 @@ impl TemporalEstimator {
             }
         }
         for (i, ld) in rotation_log_det.iter().enumerate() {
-            if !rotations_accepted.contains(&i) {
+            if !rotations_accepted.contains(&i) && ld.is_finite() {
                 log_likelihood -= 0.5 * (ROTATION_GATE + ld);
             }
         }
