@@ -470,36 +470,37 @@ fn linearise_rotation(
     s: &DVector<f64>,
 ) -> (nalgebra::Vector3<f64>, DMatrix<f64>) {
     let (current, past) = (&rays[m.current], &rays[m.past]);
-    let errors = |ray: &Ray, s: &DVector<f64>| -> [f64; 6] {
-        std::array::from_fn(|k| s[ray.slot + k] + ray.gm.map_or(0.0, |g| s[g + k]))
-    };
-    let residual = |s: &DVector<f64>| {
+    // The residual with state `bumped` raised by `STEP` (none: at `s` itself), read in
+    // place: no copy of the state per column.
+    const STEP: f64 = 1e-7;
+    let residual = |bumped: Option<usize>| {
+        let at = |i: usize| if Some(i) == bumped { s[i] + STEP } else { s[i] };
+        let errors = |ray: &Ray| -> [f64; 6] {
+            std::array::from_fn(|k| at(ray.slot + k) + ray.gm.map_or(0.0, |g| at(g + k)))
+        };
         rotation_residual(
             &current.obs,
             &past.obs,
-            [s[5], s[6]],
-            &errors(current, s),
-            &errors(past, s),
+            [at(5), at(6)],
+            &errors(current),
+            &errors(past),
             &m.measured,
         )
     };
-    let r0 = residual(s);
-    let mut columns = vec![5, 6];
-    for ray in [current, past] {
-        for k in 3..6 {
-            columns.push(ray.slot + k);
-            columns.extend(ray.gm.map(|g| g + k));
-        }
-    }
-    columns.sort_unstable();
-    columns.dedup();
+    let r0 = residual(None);
+    // The biases and each image's yaw, pitch and roll errors (the current one's
+    // correlated block too): distinct states, each differenced once.
+    let attitude = |ray: &Ray| {
+        let (slot, gm) = (ray.slot, ray.gm);
+        (3..6).flat_map(move |k| std::iter::once(slot + k).chain(gm.map(|g| g + k)))
+    };
     let mut h = DMatrix::<f64>::zeros(3, s.len());
-    let mut t = s.clone();
-    const STEP: f64 = 1e-7;
-    for c in columns {
-        t[c] += STEP;
-        let d = (residual(&t) - r0) / STEP;
-        t[c] = s[c];
+    for c in [5, 6]
+        .into_iter()
+        .chain(attitude(current))
+        .chain(attitude(past))
+    {
+        let d = (residual(Some(c)) - r0) / STEP;
         h.column_mut(c).copy_from(&d);
     }
     (r0, h)
