@@ -148,6 +148,18 @@ impl RunRecord {
             .map(|e| e.t_s)
     }
 
+    /// Mean vertical error (estimate − truth) after the warm-up; NaN when none.
+    pub fn mean_z_after(&self, warm_up_s: f64) -> f64 {
+        let (s, n) = self
+            .after(warm_up_s)
+            .fold((0.0, 0usize), |(s, n), e| (s + e.err[2], n + 1));
+        if n == 0 {
+            f64::NAN
+        } else {
+            s / n as f64
+        }
+    }
+
     /// Shares (%) of estimates inside h_acc and inside v_acc, from the first estimate.
     pub fn within_shares(&self) -> [f64; 2] {
         let n = self.estimates.len();
@@ -208,10 +220,43 @@ pub struct SceneSummary {
     pub h_acc_2m_median_s: f64,
     /// Per-run share inside h_acc and v_acc, (seed, h %, v %).
     pub per_run_within: Vec<(u64, f64, f64)>,
+    /// Share inside h_acc and v_acc (%) and the count per [`AGE_BINS_S`] bin.
+    pub within_by_age: Vec<(f64, f64, usize)>,
 }
 
 /// Trust means the 3-D error stays within this, metres.
 pub const TRUST_M: f64 = 2.0;
+
+/// The calibration's age bins: seconds since a run's first estimate, [from, to). The
+/// pooled share inside h_acc / v_acc can be right on average while the filter is
+/// over-confident while it converges and cautious afterwards; these bins show which.
+pub const AGE_BINS_S: [(f64, f64); 4] =
+    [(0.0, 3.0), (3.0, 6.0), (6.0, 10.0), (10.0, f64::INFINITY)];
+
+/// Shares (%) inside h_acc and inside v_acc, and the count, of the estimates made
+/// [from, to) seconds after their run's first estimate, pooled over runs.
+pub fn within_by_age(runs: &[RunRecord], (from, to): (f64, f64)) -> (f64, f64, usize) {
+    let rows: Vec<&EstimateRow> = runs
+        .iter()
+        .flat_map(|r| {
+            let t0 = r.estimates.first().map_or(0.0, |e| e.t_s);
+            r.estimates.iter().filter(move |e| {
+                let age = e.t_s - t0;
+                age >= from && age < to
+            })
+        })
+        .collect();
+    let n = rows.len();
+    if n == 0 {
+        return (f64::NAN, f64::NAN, 0);
+    }
+    let share = |k: usize| 100.0 * k as f64 / n as f64;
+    (
+        share(rows.iter().filter(|e| e.h_err() <= e.h_acc()).count()),
+        share(rows.iter().filter(|e| e.err[2].abs() <= e.v_acc).count()),
+        n,
+    )
+}
 
 pub fn summarise(runs: &[RunRecord], warm_up_s: f64) -> SceneSummary {
     let maes: Vec<[f64; 4]> = runs.iter().map(|r| r.mae_after(warm_up_s)).collect();
@@ -311,6 +356,10 @@ pub fn summarise(runs: &[RunRecord], warm_up_s: f64) -> SceneSummary {
                 let [h, v] = r.within_shares();
                 (r.seed, h, v)
             })
+            .collect(),
+        within_by_age: AGE_BINS_S
+            .iter()
+            .map(|&bin| within_by_age(runs, bin))
             .collect(),
     }
 }
@@ -512,6 +561,38 @@ mod tests {
             .collect();
         let s = summarise(&liar, 10.0);
         assert!(s.mean_nees > 20.0 && s.gross_pct > 10.0 && s.within_v_acc_pct < 40.0);
+    }
+
+    /// A filter that states 1 m throughout while its errors shrink from 3 m to 0.3 m is
+    /// calibrated on average only: the age bins show it over-confident first and
+    /// cautious later, counted from each run's own first estimate.
+    #[test]
+    fn calibration_by_age_counts_from_each_runs_first_estimate() {
+        let run = |seed: u64, t0: f64| RunRecord {
+            seed,
+            estimates: (0..200)
+                .map(|i| {
+                    // Steps of 1/8 s from a start that is a binary fraction: every
+                    // age is exact, so the bins' edges fall where written.
+                    let age = i as f64 * 0.125;
+                    let e = if age < 6.0 { 3.0 } else { 0.3 };
+                    row(t0 + age, [e, 0.0, e], 1.0)
+                })
+                .collect(),
+            ..Default::default()
+        };
+        let runs = [run(1, 2.0), run(2, 7.5)];
+        let s = summarise(&runs, 10.0);
+        let bins = &s.within_by_age;
+        assert_eq!(bins.len(), AGE_BINS_S.len());
+        // h_acc = √2 m: 3 m is outside, 0.3 m inside; v_acc 1 m the same.
+        assert_eq!((bins[0].0, bins[0].1, bins[0].2), (0.0, 0.0, 48));
+        assert_eq!((bins[1].0, bins[1].1, bins[1].2), (0.0, 0.0, 48));
+        assert_eq!((bins[2].0, bins[2].1, bins[2].2), (100.0, 100.0, 64));
+        assert_eq!((bins[3].0, bins[3].1, bins[3].2), (100.0, 100.0, 240));
+        assert!((runs[0].mean_z_after(10.0) - 0.3).abs() < 1e-12);
+        assert!(RunRecord::default().mean_z_after(10.0).is_nan());
+        assert!(within_by_age(&[], AGE_BINS_S[0]).0.is_nan());
     }
 
     #[test]
