@@ -34,6 +34,20 @@ fn outside(v: f64, (lo, hi): (f64, f64)) -> bool {
     !(lo..=hi).contains(&v)
 }
 
+/// A signed metre figure to 2 decimals: "–" when there is none (no estimate after
+/// the warm-up), and no "-0.00".
+fn signed(v: f64) -> String {
+    if !v.is_finite() {
+        return "–".into();
+    }
+    let s = format!("{v:+.2}");
+    if s == "-0.00" {
+        "+0.00".into()
+    } else {
+        s
+    }
+}
+
 fn secs(v: f64) -> String {
     if v.is_finite() {
         format!("{v:.1}")
@@ -102,7 +116,7 @@ pub fn section(
     {
         let _ = writeln!(
             w,
-            "Per seed, `default`, white errors (each within {}–{} %). A run's vertical error after {WARM_UP_S:.0} s is mostly one offset that it keeps (its mean, the last column): a run whose offset is beyond v_acc has few of its estimates inside, one whose offset is small nearly all, so one seed's share measures its offset, not the 1σ:\n",
+            "Per seed, `default`, white errors (each within {}–{} %). More than half of a run's vertical error after {WARM_UP_S:.0} s is an offset that it keeps (its mean, the last column): a run whose offset is beyond v_acc has few of its estimates inside, one whose offset is small nearly all, so one seed's share measures its offset more than the 1σ:\n",
             WITHIN_ONE_SEED_PCT.0, WITHIN_ONE_SEED_PCT.1
         );
         let _ = writeln!(
@@ -114,12 +128,12 @@ pub fn section(
             let m = r.mae_after(WARM_UP_S);
             let _ = writeln!(
                 w,
-                "| {seed} | {h:.0} %{} | {v:.0} %{} | {:.2} / {:.2} | {:+.2} |",
+                "| {seed} | {h:.0} %{} | {v:.0} %{} | {:.2} / {:.2} | {} |",
                 miss(outside(*h, WITHIN_ONE_SEED_PCT)),
                 miss(outside(*v, WITHIN_ONE_SEED_PCT)),
                 m[3],
                 m[2],
-                r.mean_z_after(WARM_UP_S)
+                signed(r.mean_z_after(WARM_UP_S))
             );
         }
         let _ = writeln!(w);
@@ -138,12 +152,13 @@ fn age_table(w: &mut String, all: &[SceneRuns]) {
     }
     let label = |(from, to): (f64, f64)| {
         if to.is_finite() {
-            format!("{from:.0}–{to:.0} s")
+            format!("age {from:.0}–{to:.0} s")
         } else {
-            format!("≥ {from:.0} s")
+            format!("age ≥ {from:.0} s")
         }
     };
-    let _ = writeln!(w, "Calibration by the estimate's age (seconds since its run's first estimate): the share inside h_acc / v_acc, pooled over seeds (target {}–{} % in each; a share outside it is in bold). The shares from the first estimate in the tables above pool these bins:\n", WITHIN_PCT.0, WITHIN_PCT.1);
+    let _ = writeln!(w, "### Calibration by the estimate's age\n");
+    let _ = writeln!(w, "The age is the seconds since the run's first estimate (not the flight's clock of the \"after {WARM_UP_S:.0} s\" columns): the share inside h_acc / v_acc, pooled over seeds (target {}–{} % in each; a share outside it is in bold). The shares from the first estimate in the tables above pool these bins:\n", WITHIN_PCT.0, WITHIN_PCT.1);
     let heads: Vec<String> = AGE_BINS_S.iter().map(|&b| label(b)).collect();
     let _ = writeln!(w, "| scene | errors | {} |", heads.join(" | "));
     let _ = writeln!(w, "| --- | --- |{}", " --- |".repeat(heads.len()));
@@ -361,6 +376,14 @@ pub fn json(all: &[SceneRuns]) -> serde_json::Value {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_signed_cell_has_no_nan_and_no_negative_zero() {
+        assert_eq!(signed(-0.001), "+0.00");
+        assert_eq!(signed(-0.3), "-0.30");
+        assert_eq!(signed(0.25), "+0.25");
+        assert_eq!(signed(f64::NAN), "–");
+    }
 
     #[test]
     fn one_run_gives_no_nan_in_the_mean_z_cell() {
