@@ -298,10 +298,8 @@ pub fn summarise(runs: &[RunRecord], warm_up_s: f64) -> SceneSummary {
     };
     let run_means: Vec<f64> = runs
         .iter()
-        .filter_map(|r| {
-            let z: Vec<f64> = r.after(warm_up_s).map(|e| e.err[2]).collect();
-            (!z.is_empty()).then(|| z.iter().sum::<f64>() / z.len() as f64)
-        })
+        .map(|r| r.mean_z_after(warm_up_s))
+        .filter(|m| !m.is_nan())
         .collect();
     let mean_z_err_se_m = if run_means.len() < 2 {
         f64::NAN
