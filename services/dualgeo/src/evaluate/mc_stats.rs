@@ -162,22 +162,25 @@ impl RunRecord {
 
     /// Shares (%) of estimates inside h_acc and inside v_acc, from the first estimate.
     pub fn within_shares(&self) -> [f64; 2] {
-        let n = self.estimates.len();
-        if n == 0 {
-            return [f64::NAN; 2];
-        }
-        let h = self
-            .estimates
-            .iter()
-            .filter(|e| e.h_err() <= e.h_acc())
-            .count();
-        let v = self
-            .estimates
-            .iter()
-            .filter(|e| e.err[2].abs() <= e.v_acc)
-            .count();
-        [100.0 * h as f64 / n as f64, 100.0 * v as f64 / n as f64]
+        let (h, v, _) = shares_inside(&self.estimates);
+        [h, v]
     }
+}
+
+/// Shares (%) of `rows` whose horizontal (vertical) error is within the stated h_acc
+/// (v_acc), and their count; NaN shares when there are none.
+fn shares_inside<'a>(rows: impl IntoIterator<Item = &'a EstimateRow>) -> (f64, f64, usize) {
+    let (mut h, mut v, mut n) = (0usize, 0usize, 0usize);
+    for e in rows {
+        n += 1;
+        h += usize::from(e.h_err() <= e.h_acc());
+        v += usize::from(e.err[2].abs() <= e.v_acc);
+    }
+    if n == 0 {
+        return (f64::NAN, f64::NAN, 0);
+    }
+    let share = |k: usize| 100.0 * k as f64 / n as f64;
+    (share(h), share(v), n)
 }
 
 /// A scene's runs together: the Monte Carlo table's row.
@@ -236,26 +239,13 @@ pub const AGE_BINS_S: [(f64, f64); 4] =
 /// Shares (%) inside h_acc and inside v_acc, and the count, of the estimates made
 /// [from, to) seconds after their run's first estimate, pooled over runs.
 pub fn within_by_age(runs: &[RunRecord], (from, to): (f64, f64)) -> (f64, f64, usize) {
-    let rows: Vec<&EstimateRow> = runs
-        .iter()
-        .flat_map(|r| {
-            let t0 = r.estimates.first().map_or(0.0, |e| e.t_s);
-            r.estimates.iter().filter(move |e| {
-                let age = e.t_s - t0;
-                age >= from && age < to
-            })
+    shares_inside(runs.iter().flat_map(|r| {
+        let t0 = r.estimates.first().map_or(0.0, |e| e.t_s);
+        r.estimates.iter().filter(move |e| {
+            let age = e.t_s - t0;
+            age >= from && age < to
         })
-        .collect();
-    let n = rows.len();
-    if n == 0 {
-        return (f64::NAN, f64::NAN, 0);
-    }
-    let share = |k: usize| 100.0 * k as f64 / n as f64;
-    (
-        share(rows.iter().filter(|e| e.h_err() <= e.h_acc()).count()),
-        share(rows.iter().filter(|e| e.err[2].abs() <= e.v_acc).count()),
-        n,
-    )
+    }))
 }
 
 pub fn summarise(runs: &[RunRecord], warm_up_s: f64) -> SceneSummary {
@@ -281,6 +271,7 @@ pub fn summarise(runs: &[RunRecord], warm_up_s: f64) -> SceneSummary {
             100.0 * k as f64 / n as f64
         }
     };
+    let within = shares_inside(all.iter().copied());
     let nees: Vec<f64> = all.iter().filter_map(|e| e.nees()).collect();
     let mean_nees = if nees.is_empty() {
         f64::NAN
@@ -337,8 +328,8 @@ pub fn summarise(runs: &[RunRecord], warm_up_s: f64) -> SceneSummary {
         located_not_visible: runs.iter().map(|r| r.located_not_visible).sum(),
         look_alike_estimates: runs.iter().map(RunRecord::look_alike_estimates).sum(),
         look_alike_runs: runs.iter().filter(|r| r.look_alike_estimates() > 0).count(),
-        within_h_acc_pct: pct(all.iter().filter(|e| e.h_err() <= e.h_acc()).count()),
-        within_v_acc_pct: pct(all.iter().filter(|e| e.err[2].abs() <= e.v_acc).count()),
+        within_h_acc_pct: within.0,
+        within_v_acc_pct: within.1,
         gross_pct: pct(all.iter().filter(|e| e.gross()).count()),
         mean_nees,
         nees_bounds,
