@@ -97,7 +97,7 @@ fn a_live_gimbal_flight_gives_each_frame_the_camera_on_its_gimbal() {
     assert!(estimates >= 20, "only {estimates} estimates\n{log}");
     // ...and the camera's pose on its gimbal is the one used: each estimate's distance
     // to the target's true path, at any time (the live run's clock starts at its first
-    // pair, ~3.3 s into the recording here). Measured: median 1.4-3.0 m over three runs
+    // pair, ~3.3 s into the recording here). Measured: median 1.4-3.0 m over four runs
     // (the live chain's H.264 and host-clock poses; the recorded gimbal flight's
     // horizontal MAE is ~1 m). A misread gimbal message (a yaw taken in the wrong frame,
     // a camera taken as nadir) turns the camera by tens of degrees: tens of metres.

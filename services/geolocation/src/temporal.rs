@@ -517,9 +517,9 @@ fn linearise_rotation(
 /// beyond 2.4° (up to 12°), and in 23 of 792 frames half or more of them are, together:
 /// a current image whose homographies with the other UAV's past images all went wrong
 /// (`gimbal` 6 of 698 frames, `suite_town` 0 of 821; the same UAV's rotations in none
-/// on the three flights). Under a white attitude error each current image's own 2° state takes
-/// up such a frame; under a correlated one its 0.2° jitter cannot, and the yaw biases'
-/// difference and, for cameras looking ahead, the range took it. Monte Carlo under
+/// on the three flights). Under a white attitude error each current image's own 2°
+/// state takes up such a frame; under a correlated one its 0.2° jitter cannot, and the
+/// yaw biases' difference and, for cameras looking ahead, the range took it. Monte Carlo under
 /// correlated errors (8 seeds each, docs/temporal.md "The other UAV's rotations under
 /// correlated errors"): `tilted` 14.0 → 1.0 % gross, NEES 7.4 → 2.8, mean altitude
 /// error −4.1 → −0.8 m; `suite_traffic` 4.5 → 0.0 %, worst run 18.0 → 6.8 m;
