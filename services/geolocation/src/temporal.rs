@@ -525,7 +525,10 @@ fn linearise_rotation(
 /// error −4.1 → −0.8 m; `suite_traffic` 4.5 → 0.0 %, worst run 18.0 → 6.8 m;
 /// `gimbal` 2.5 → 0.2 %; `default` x / y MAE 1.73 / 1.28 → 1.46 / 1.17 m. Holding them
 /// off instead cost `suite_traffic` (7.3 % gross); all rotations 3× cost it 3.6 %; a
-/// correlation between a frame's rotations (0.7) made `tilted` worse (20.7 %).
+/// correlation between a frame's rotations (0.7) made `tilted` worse (20.7 %); 2× left
+/// `tilted` 4.2 % and `suite_traffic` 4.4 %; a frame-level gate (a current image's
+/// rotations from the other UAV dropped when half are far from the prediction) at 1×
+/// left `tilted` 17.8 %: those frames do not look wrong at the prediction.
 const CORRELATED_CROSS_ROTATION_INFLATION: f64 = 3.0;
 
 /// σ's (about a horizontal axis, about the vertical; degrees) of the rotation measured
