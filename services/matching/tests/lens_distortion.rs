@@ -68,9 +68,17 @@ fn run(preset: &str, tell_the_lens: bool) -> (usize, usize, f64) {
 
 #[test]
 fn a_distorted_camera_locates_like_its_pinhole_twin() {
-    let (pin_n, pin_tried, pin_err) = run("suite_wide_pinhole", true);
-    let (lens_n, lens_tried, lens_err) = run("suite_wide_lens", true);
-    let (raw_n, _, raw_err) = run("suite_wide_lens", false);
+    // The three flights are independent: flown side by side on the cores.
+    let [(pin_n, pin_tried, pin_err), (lens_n, lens_tried, lens_err), (raw_n, _, raw_err)] =
+        std::thread::scope(|s| {
+            [
+                ("suite_wide_pinhole", true),
+                ("suite_wide_lens", true),
+                ("suite_wide_lens", false),
+            ]
+            .map(|(preset, tell)| s.spawn(move || run(preset, tell)))
+            .map(|h| h.join().expect("flight thread"))
+        });
     eprintln!(
         "pinhole: {pin_n}/{pin_tried} located, median error {pin_err:.3} m; \
          distorted, undistorted by matching: {lens_n}/{lens_tried}, {lens_err:.3} m; \
