@@ -164,18 +164,38 @@ fn run_suite(args: &EvaluateArgs, every: u64) -> Result<String> {
     matching
         .validate()
         .map_err(|e| anyhow::anyhow!("[matching]: {e}"))?;
-    let mut results = Vec::new();
-    for name in &scenes {
-        bar.set_message(format!("suite: {name}"));
-        results.push(suite::run_scene(
-            name,
-            every,
-            args.suite_duration_s,
-            &matching,
-            &bar,
-        )?);
-    }
+    // Scenes are independent: one per core at a time, as the Monte Carlo's seeds. Each
+    // scene's result is the same whichever thread flies it (its own stream and lanes).
+    let threads = std::thread::available_parallelism()
+        .map_or(2, |n| n.get())
+        .min(scenes.len());
+    bar.set_message(format!("suite: {} scenes", scenes.len()));
+    let slots: Vec<Mutex<Option<Result<suite::SceneResult>>>> =
+        scenes.iter().map(|_| Mutex::new(None)).collect();
+    let next = AtomicUsize::new(0);
+    std::thread::scope(|scope| {
+        for _ in 0..threads {
+            scope.spawn(|| loop {
+                let i = next.fetch_add(1, Ordering::Relaxed);
+                let Some(name) = scenes.get(i) else { break };
+                let r = suite::run_scene(name, every, args.suite_duration_s, &matching, &bar);
+                if let Ok(mut slot) = slots[i].lock() {
+                    *slot = Some(r);
+                }
+            });
+        }
+    });
     bar.finish();
+    let results = slots
+        .into_iter()
+        .zip(&scenes)
+        .map(|(slot, name)| {
+            slot.into_inner()
+                .ok()
+                .flatten()
+                .unwrap_or_else(|| Err(anyhow::anyhow!("suite scene {name} panicked")))
+        })
+        .collect::<Result<Vec<_>>>()?;
     std::fs::create_dir_all(&args.out).with_context(|| format!("create {}", args.out.display()))?;
     let json = args.out.join("suite.json");
     std::fs::write(
