@@ -20,6 +20,7 @@ pub mod monte_carlo;
 mod multi_target;
 mod noise;
 mod plots;
+mod pool;
 mod report;
 mod stream;
 pub mod suite;
@@ -33,8 +34,6 @@ use indicatif::{ProgressBar, ProgressStyle};
 use noise::ScenarioResult;
 use std::collections::BTreeMap;
 use std::path::PathBuf;
-use std::sync::atomic::{AtomicUsize, Ordering};
-use std::sync::Mutex;
 use std::time::Instant;
 
 #[derive(Debug, clap::Args)]
@@ -164,38 +163,12 @@ fn run_suite(args: &EvaluateArgs, every: u64) -> Result<String> {
     matching
         .validate()
         .map_err(|e| anyhow::anyhow!("[matching]: {e}"))?;
-    // Scenes are independent: one per core at a time, as the Monte Carlo's seeds. Each
-    // scene's result is the same whichever thread flies it (its own stream and lanes).
-    let threads = std::thread::available_parallelism()
-        .map_or(2, |n| n.get())
-        .min(scenes.len());
+    // Scenes are independent: one per core at a time, as the Monte Carlo's seeds.
     bar.set_message(format!("suite: {} scenes", scenes.len()));
-    let slots: Vec<Mutex<Option<Result<suite::SceneResult>>>> =
-        scenes.iter().map(|_| Mutex::new(None)).collect();
-    let next = AtomicUsize::new(0);
-    std::thread::scope(|scope| {
-        for _ in 0..threads {
-            scope.spawn(|| loop {
-                let i = next.fetch_add(1, Ordering::Relaxed);
-                let Some(name) = scenes.get(i) else { break };
-                let r = suite::run_scene(name, every, args.suite_duration_s, &matching, &bar);
-                if let Ok(mut slot) = slots[i].lock() {
-                    *slot = Some(r);
-                }
-            });
-        }
-    });
+    let results = pool::on_every_core(&scenes, |_, name| {
+        suite::run_scene(name, every, args.suite_duration_s, &matching, &bar)
+    })?;
     bar.finish();
-    let results = slots
-        .into_iter()
-        .zip(&scenes)
-        .map(|(slot, name)| {
-            slot.into_inner()
-                .ok()
-                .flatten()
-                .unwrap_or_else(|| Err(anyhow::anyhow!("suite scene {name} panicked")))
-        })
-        .collect::<Result<Vec<_>>>()?;
     std::fs::create_dir_all(&args.out).with_context(|| format!("create {}", args.out.display()))?;
     let json = args.out.join("suite.json");
     std::fs::write(
@@ -462,37 +435,25 @@ pub fn run(args: &EvaluateArgs) -> Result<()> {
                 .with_context(|| format!("preset {preset}"))
         })
         .collect::<Result<Vec<_>>>()?;
-    let results: Mutex<BTreeMap<(String, usize), ScenarioResult>> = Mutex::new(BTreeMap::new());
-    let next = AtomicUsize::new(0);
     let bar = ProgressBar::new(jobs.len() as u64);
     bar.set_style(
         ProgressStyle::with_template("{msg:28} {bar:40} {pos}/{len} {elapsed_precise}")
             .unwrap_or_else(|_| ProgressStyle::default_bar()),
     );
     bar.set_message("noise passes (estimators)");
-    let threads = std::thread::available_parallelism().map_or(2, |n| n.get());
-    std::thread::scope(|scope| {
-        for _ in 0..threads {
-            scope.spawn(|| loop {
-                let i = next.fetch_add(1, Ordering::Relaxed);
-                let Some((name, n)) = jobs.get(i) else { break };
-                let records = pass.records.get(n).map(Vec::as_slice).unwrap_or(&[]);
-                let step = (name == STEP_SCENARIO).then_some(noise::BiasStep {
-                    at_s: STEP_AT_S,
-                    step_deg: [STEP_DEG, 0.0],
-                });
-                let r = noise::run(&configs[i], records, name == "table2", step);
-                if let Ok(mut map) = results.lock() {
-                    map.insert((name.clone(), *n), r);
-                }
-                bar.inc(1);
-            });
-        }
-    });
+    let passes = pool::on_every_core(&jobs, |i, (name, n)| {
+        let records = pass.records.get(n).map(Vec::as_slice).unwrap_or(&[]);
+        let step = (name == STEP_SCENARIO).then_some(noise::BiasStep {
+            at_s: STEP_AT_S,
+            step_deg: [STEP_DEG, 0.0],
+        });
+        let r = noise::run(&configs[i], records, name == "table2", step);
+        bar.inc(1);
+        Ok(r)
+    })?;
     bar.finish();
-    let results = results
-        .into_inner()
-        .map_err(|_| anyhow::anyhow!("a noise pass panicked"))?;
+    let results: BTreeMap<(String, usize), ScenarioResult> =
+        jobs.iter().cloned().zip(passes).collect();
     let suite = if args.no_suite {
         None
     } else {

@@ -27,7 +27,6 @@ use shared_types::nav_noise::{BiasModel, NavErrorModel};
 use std::hash::{Hash, Hasher};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicUsize, Ordering};
-use std::sync::Mutex;
 
 /// Errors count after this many seconds in the "after 10 s" columns.
 pub const WARM_UP_S: f64 = 10.0;
@@ -307,48 +306,19 @@ pub fn run(plan: &Plan, progress: &indicatif::ProgressBar) -> Result<(Vec<SceneR
         std::fs::create_dir_all(dir).with_context(|| format!("create {}", dir.display()))?;
     }
     progress.set_length(jobs.len() as u64);
-    let results: Mutex<Vec<Option<RunRecord>>> = Mutex::new(vec![None; jobs.len()]);
-    let failure: Mutex<Option<anyhow::Error>> = Mutex::new(None);
-    let next = AtomicUsize::new(0);
     let reused = AtomicUsize::new(0);
-    let threads = std::thread::available_parallelism().map_or(2, |n| n.get());
-    std::thread::scope(|scope| {
-        for _ in 0..threads {
-            scope.spawn(|| loop {
-                let i = next.fetch_add(1, Ordering::Relaxed);
-                let Some((scene, nav, crf, seed, config)) = jobs.get(i) else {
-                    break;
-                };
-                if failure.lock().map_or(true, |f| f.is_some()) {
-                    break;
-                }
-                match run_cached(plan, scene, *nav, *crf, *seed, config) {
-                    Ok((r, from_cache)) => {
-                        reused.fetch_add(from_cache as usize, Ordering::Relaxed);
-                        if let Ok(mut all) = results.lock() {
-                            all[i] = Some(r);
-                        }
-                    }
-                    Err(e) => {
-                        let link = crf.map(|c| format!(" crf {c}")).unwrap_or_default();
-                        if let Ok(mut f) = failure.lock() {
-                            f.get_or_insert(e.context(format!("{scene}{link} seed {seed}")));
-                        }
-                    }
-                }
-                progress.inc(1);
-            });
-        }
-    });
-    if let Some(e) = failure.into_inner().ok().flatten() {
-        return Err(e);
-    }
-    let results = results
-        .into_inner()
-        .map_err(|_| anyhow::anyhow!("a Monte Carlo run panicked"))?;
+    let records = super::pool::on_every_core(&jobs, |_, (scene, nav, crf, seed, config)| {
+        let (r, from_cache) =
+            run_cached(plan, scene, *nav, *crf, *seed, config).with_context(|| {
+                let link = crf.map(|c| format!(" crf {c}")).unwrap_or_default();
+                format!("{scene}{link} seed {seed}")
+            })?;
+        reused.fetch_add(from_cache as usize, Ordering::Relaxed);
+        progress.inc(1);
+        Ok(r)
+    })?;
     let mut out: Vec<SceneRuns> = Vec::new();
-    for ((scene, nav, crf, seed, _), record) in jobs.iter().zip(results) {
-        let mut record = record.with_context(|| format!("{scene} seed {seed} gave nothing"))?;
+    for ((scene, nav, crf, seed, _), mut record) in jobs.iter().zip(records) {
         record.seed = *seed;
         match out
             .iter_mut()
