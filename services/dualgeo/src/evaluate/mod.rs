@@ -163,11 +163,21 @@ fn run_suite(args: &EvaluateArgs, every: u64) -> Result<String> {
     matching
         .validate()
         .map_err(|e| anyhow::anyhow!("[matching]: {e}"))?;
-    // Scenes are independent: one per core at a time, as the Monte Carlo's seeds.
-    bar.set_message(format!("suite: {} scenes", scenes.len()));
-    let results = pool::on_every_core(&scenes, |_, name| {
-        suite::run_scene(name, every, args.suite_duration_s, &matching, &bar)
-    })?;
+    // One scene at a time, unlike the Monte Carlo's seeds: the table's CPU column is
+    // the process's CPU clock per pair (OpenCV's own threads included), which a
+    // second scene on the other core would count too (flown two at a time, 501 → 370 s,
+    // every CPU median doubled).
+    let mut results = Vec::new();
+    for name in &scenes {
+        bar.set_message(format!("suite: {name}"));
+        results.push(suite::run_scene(
+            name,
+            every,
+            args.suite_duration_s,
+            &matching,
+            &bar,
+        )?);
+    }
     bar.finish();
     std::fs::create_dir_all(&args.out).with_context(|| format!("create {}", args.out.display()))?;
     let json = args.out.join("suite.json");

@@ -1,5 +1,5 @@
-//! The evaluation's independent flights (noise passes, suite scenes, Monte Carlo
-//! seeds) one per core at a time. Each job's result is the same whichever thread
+//! The evaluation's independent flights (noise passes, Monte Carlo seeds) one per
+//! core at a time. Each job's result is the same whichever thread
 //! runs it: every flight owns its stream, chain and random generators.
 
 use anyhow::Result;
