@@ -71,6 +71,15 @@ pub fn section(
         "Each scene is flown over many seeds (navigation and image noise, the target's start on its route, the signs of the eq. (34) bias offset and drift), {duration_s:.0} s each, every {every} pair(s), under the paper's Table 2 errors (σ_att 2°, σ_pos 3 m, |δψ0| = 20°), through the same vision chain as `dualgeo run` and the geolocation service's own logic on the set message matching publishes (`geolocation::geolocator`: the default estimator, the other vehicles' tracks and their word on the target's detections, `geolocation::target_identity`), in one process; `dualgeo run` itself (every pair) on the same `suite_traffic` flights is scored in [multi-target-seeds.md](multi-target-seeds.md). {runs} runs: the last call flew {} of them in {seconds:.0} s on this 2-core machine and read {} back from `monte-carlo/runs/`. \"After {WARM_UP_S:.0} s\" columns count estimates from t = {WARM_UP_S:.0} s; calibration columns count every estimate from the first.\n",
         flown.flown, flown.reused
     );
+    let seeds = || all.iter().flat_map(|s| s.runs.iter().map(|r| r.seed));
+    if let (Some(lo), Some(hi)) = (seeds().min(), seeds().max()) {
+        if lo > 1 {
+            let _ = writeln!(
+                w,
+                "Held-out seeds {lo}–{hi} (`--first-seed {lo}`): flights no change was tuned on.\n"
+            );
+        }
+    }
     let _ = writeln!(w, "- **located**: pairs after {WARM_UP_S:.0} s with the target in both images that have an estimate (target ≥ 90 %), and estimates made while it was not; **of a look-alike**: estimates (from the first) horizontally nearer a car coloured like the target than the target and over {LOOK_ALIKE_MIN_M} m from it (target: none).");
     let _ = writeln!(w, "- **MAE** (m): the median over runs of each run's MAE after {WARM_UP_S:.0} s, x / y / z, then the 90th percentile of the horizontal MAE and the worst run (its seed).");
     let _ = writeln!(w, "- **inside h_acc / v_acc**: the share of estimates whose horizontal (vertical) error is within the stated 1σ, pooled over seeds (target {}–{} %; a calibrated filter puts 63 % / 68 % inside). **gross**: beyond 3× the stated accuracy (target ≤ {GROSS_MAX_PCT} %). **NEES**: mean normalised error squared over x, y, z (3 if calibrated) and its 95 % region for that many runs.", WITHIN_PCT.0, WITHIN_PCT.1);

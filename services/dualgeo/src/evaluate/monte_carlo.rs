@@ -102,6 +102,10 @@ pub fn seeded(mut config: SimConfig, seed: u64, nav: NavModel) -> SimConfig {
 pub struct Plan {
     /// (scene, seeds) in the order of the table.
     pub scenes: Vec<(String, u64)>,
+    /// The first seed of every scene: seeds `first_seed .. first_seed + seeds`
+    /// (`--first-seed`; 1 for the committed report, beyond its seeds for a held-out
+    /// set that no change was tuned on).
+    pub first_seed: u64,
     pub nav: Vec<NavModel>,
     pub duration_s: f64,
     pub every: u64,
@@ -274,8 +278,12 @@ pub struct Flown {
     pub reused: usize,
 }
 
-/// Runs the plan on every core, `progress` counting runs.
-pub fn run(plan: &Plan, progress: &indicatif::ProgressBar) -> Result<(Vec<SceneRuns>, Flown)> {
+/// One run to fly: scene, navigation model, video link, seed and the seeded scene.
+type Job = (String, NavModel, Option<u8>, u64, SimConfig);
+
+/// Every run of the plan, in the report's order: per navigation model, per scene, the
+/// rendered pixels then each crf, seeds `first_seed ..`.
+fn jobs(plan: &Plan) -> Result<Vec<Job>> {
     let presets = Presets::builtin();
     let mut jobs = Vec::new();
     for nav in &plan.nav {
@@ -291,7 +299,7 @@ pub fn run(plan: &Plan, progress: &indicatif::ProgressBar) -> Result<(Vec<SceneR
                     .map(|&c| Some(c)),
             );
             for crf in links {
-                for seed in 1..=*seeds {
+                for seed in plan.first_seed..plan.first_seed + *seeds {
                     let mut config = seeded(base.clone(), seed, *nav);
                     if let Some((pos, att)) = plan.sensor_noise {
                         config.noise.sigma_position_m = [pos; 3];
@@ -302,6 +310,12 @@ pub fn run(plan: &Plan, progress: &indicatif::ProgressBar) -> Result<(Vec<SceneR
             }
         }
     }
+    Ok(jobs)
+}
+
+/// Runs the plan on every core, `progress` counting runs.
+pub fn run(plan: &Plan, progress: &indicatif::ProgressBar) -> Result<(Vec<SceneRuns>, Flown)> {
+    let jobs = jobs(plan)?;
     if let Some(dir) = &plan.cache {
         std::fs::create_dir_all(dir).with_context(|| format!("create {}", dir.display()))?;
     }
@@ -422,6 +436,69 @@ mod tests {
         assert_eq!(signs.len(), 2);
         let gm = seeded(base, 1, NavModel::GaussMarkov);
         assert_ne!(gm.noise.model, NavErrorModel::White);
+    }
+
+    /// `--first-seed`: a held-out set is other flights of the same scenes, the seeds
+    /// counted from it, and seed k is the same flight whichever call flies it.
+    #[test]
+    fn first_seed_shifts_every_scene_to_other_flights() {
+        let plan = |first_seed| Plan {
+            scenes: vec![("default".into(), 3), ("tilted".into(), 2)],
+            first_seed,
+            nav: vec![NavModel::White],
+            duration_s: 20.0,
+            every: 2,
+            matching: MatchingConfig::default(),
+            crfs: vec![28],
+            cache: None,
+            reuse: true,
+            told_default_noise: false,
+            sensor_noise: None,
+        };
+        let committed = jobs(&plan(1)).unwrap();
+        let held_out = jobs(&plan(21)).unwrap();
+        let seeds = |j: &[Job]| {
+            j.iter()
+                .map(|j| (j.0.clone(), j.2, j.3))
+                .collect::<Vec<_>>()
+        };
+        let d = |c, s| ("default".to_string(), c, s);
+        let t = |s| ("tilted".to_string(), None, s);
+        assert_eq!(
+            seeds(&committed),
+            vec![
+                d(None, 1),
+                d(None, 2),
+                d(None, 3),
+                d(Some(28), 1),
+                d(Some(28), 2),
+                d(Some(28), 3),
+                t(1),
+                t(2)
+            ]
+        );
+        assert_eq!(
+            seeds(&held_out),
+            vec![
+                d(None, 21),
+                d(None, 22),
+                d(None, 23),
+                d(Some(28), 21),
+                d(Some(28), 22),
+                d(Some(28), 23),
+                t(21),
+                t(22)
+            ]
+        );
+        for h in &held_out {
+            assert!(
+                committed.iter().all(|c| c.4.seed != h.4.seed),
+                "seed {} repeats a flight",
+                h.3
+            );
+        }
+        // Seed 22 starting the held-out set is the same flight as seed 22 in a longer one.
+        assert_eq!(jobs(&plan(22)).unwrap()[0].4, held_out[1].4);
     }
 
     /// `suite_traffic`: a red car like the target overtakes it. Seeds where the chain
