@@ -462,34 +462,23 @@ mod tests {
                 .map(|j| (j.0.clone(), j.2, j.3))
                 .collect::<Vec<_>>()
         };
-        let d = |c, s| ("default".to_string(), c, s);
-        let t = |s| ("tilted".to_string(), None, s);
-        assert_eq!(
-            seeds(&committed),
+        // The rendered pixels' seeds, then crf 28's, then `tilted`'s, from `first`.
+        let expected = |first: u64| {
+            let d = |c, k| ("default".to_string(), c, first + k);
+            let t = |k| ("tilted".to_string(), None, first + k);
             vec![
+                d(None, 0),
                 d(None, 1),
                 d(None, 2),
-                d(None, 3),
+                d(Some(28), 0),
                 d(Some(28), 1),
                 d(Some(28), 2),
-                d(Some(28), 3),
+                t(0),
                 t(1),
-                t(2)
             ]
-        );
-        assert_eq!(
-            seeds(&held_out),
-            vec![
-                d(None, 21),
-                d(None, 22),
-                d(None, 23),
-                d(Some(28), 21),
-                d(Some(28), 22),
-                d(Some(28), 23),
-                t(21),
-                t(22)
-            ]
-        );
+        };
+        assert_eq!(seeds(&committed), expected(1));
+        assert_eq!(seeds(&held_out), expected(21));
         for h in &held_out {
             assert!(
                 committed.iter().all(|c| c.4.seed != h.4.seed),
