@@ -1421,8 +1421,17 @@ impl TemporalEstimator {
         let mut accepted = Vec::new();
         // ln det of each ray's innovation covariance, for the likelihood of those gated out.
         let mut log_det = vec![0.0; rays.len()];
-        // Each UAV's persistence factor of its running mean's variance.
-        let mut persistence = [1.0; 2];
+        // Each UAV's persistence factor of its running mean's variance, from its
+        // current ray below. A UAV whose ray is not linearised this time keeps its
+        // mean as it was; under a correlated model it is then judged at the widest
+        // factor (all of the innovation held, ρ = 1), never as if white.
+        let mut persistence = [Uav::Left, Uav::Right].map(|uav| {
+            if self.gm_block(uav).is_some() {
+                persistence_factor(&[(1.0, 1.0)])
+            } else {
+                1.0
+            }
+        });
         for (i, ray) in rays.iter().enumerate() {
             let Some((r, c, h)) = self.linearise(ray, &s, None) else {
                 continue;
