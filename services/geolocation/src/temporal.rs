@@ -2877,6 +2877,23 @@ mod tests {
         );
     }
 
+    /// The synthetic flight under the simulator's consumer GPS errors (Table 2's σ's,
+    /// keyframes every 8 m) and the filter told so.
+    fn consumer_gps_flight() -> (SyntheticScenario, EstimatorConfig) {
+        use shared_types::nav_noise::{NavErrorModel, NavNoise};
+        let sc = SyntheticScenario {
+            keyframe_spacing_m: 8.0,
+            noise: NavNoise {
+                model: NavErrorModel::consumer_gps(),
+                ..NavNoise::isotropic(3.0, 2.0)
+            },
+            ..Default::default()
+        };
+        let mut config = EstimatorConfig::default();
+        told_consumer_gps(&mut config);
+        (sc, config)
+    }
+
     /// Issue #23 item 7: under correlated navigation errors (the simulator's consumer
     /// GPS: τ 120 s + 0.3 m, AHRS τ 10 s + 0.2°, σ's of Table 2), told so, the filter
     /// is as honest as under white ones, from the first estimate. Estimating the
@@ -2884,18 +2901,7 @@ mod tests {
     /// beyond 3σ over the first 24 of these runs (`considered_tilts`, the slots' lag).
     #[test]
     fn nees_is_within_its_chi2_region_under_correlated_navigation_errors() {
-        use shared_types::nav_noise::{NavErrorModel, NavNoise};
-        let model = NavErrorModel::consumer_gps();
-        let sc = SyntheticScenario {
-            keyframe_spacing_m: 8.0,
-            noise: NavNoise {
-                model,
-                ..NavNoise::isotropic(3.0, 2.0)
-            },
-            ..Default::default()
-        };
-        let mut config = EstimatorConfig::default();
-        told_consumer_gps(&mut config);
+        let (sc, config) = consumer_gps_flight();
         // 48 runs: over 24 the share beyond 3σ moved by 0.4 points with the temper
         // (one seed late in its run near 3σ at every temper); over these 48 it is 0.25 %
         // at 1 and 0.61 % at 0.3. χ²(144) at 2.5 % and 97.5 %: 112.7 and 179.1.
@@ -2936,17 +2942,7 @@ mod tests {
     /// correlated errors").
     #[test]
     fn correlated_errors_raise_no_false_alarm() {
-        use shared_types::nav_noise::{NavErrorModel, NavNoise};
-        let sc = SyntheticScenario {
-            keyframe_spacing_m: 8.0,
-            noise: NavNoise {
-                model: NavErrorModel::consumer_gps(),
-                ..NavNoise::isotropic(3.0, 2.0)
-            },
-            ..Default::default()
-        };
-        let mut config = EstimatorConfig::default();
-        told_consumer_gps(&mut config);
+        let (sc, config) = consumer_gps_flight();
         let (mut coasting, mut reopened, mut n) = (0, 0, 0);
         for seed in 0..8 {
             let (run, _) = fly_keyframes(&sc, config, 20.0, 500 + seed, Disturbance::default());
@@ -2968,17 +2964,7 @@ mod tests {
     /// variance took the correlated share in).
     #[test]
     fn a_bias_step_is_followed_under_correlated_errors() {
-        use shared_types::nav_noise::{NavErrorModel, NavNoise};
-        let sc = SyntheticScenario {
-            keyframe_spacing_m: 8.0,
-            noise: NavNoise {
-                model: NavErrorModel::consumer_gps(),
-                ..NavNoise::isotropic(3.0, 2.0)
-            },
-            ..Default::default()
-        };
-        let mut config = EstimatorConfig::default();
-        told_consumer_gps(&mut config);
+        let (sc, config) = consumer_gps_flight();
         let step = Disturbance {
             left_bias_step: Some((12.0, 15.0)),
             ..Default::default()
