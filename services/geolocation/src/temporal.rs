@@ -1450,18 +1450,17 @@ impl TemporalEstimator {
             if i < 2 {
                 if let Some(g) = ray.gm {
                     let sinv = chol.inverse();
-                    let shares: Vec<(f64, f64)> = self
-                        .correlated(ray.obs.uav)
-                        .into_iter()
-                        .enumerate()
-                        .filter(|(_, (sigma, _))| *sigma > 0.0)
-                        .map(|(k, (_, tau))| {
-                            let col = h.column(g + k);
-                            let sk_k = col * col.transpose() * p[(g + k, g + k)];
-                            let f = (&sinv * sk_k).trace() / 2.0;
-                            (f, (-dt.max(0.0) / tau).exp())
-                        })
-                        .collect();
+                    let correlated = self.correlated(ray.obs.uav);
+                    // A white component (σ 0) has no share.
+                    let shares: [(f64, f64); 6] = std::array::from_fn(|k| {
+                        let (sigma, tau) = correlated[k];
+                        if sigma <= 0.0 {
+                            return (0.0, 0.0);
+                        }
+                        let col = h.column(g + k);
+                        let sk_k = col * col.transpose() * p[(g + k, g + k)];
+                        ((&sinv * sk_k).trace() / 2.0, (-dt.max(0.0) / tau).exp())
+                    });
                     persistence[ray.obs.uav.index()] = persistence_factor(&shares);
                 }
                 // Each sample enters the running mean at most at the gate's radius
