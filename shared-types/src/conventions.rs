@@ -154,6 +154,23 @@ impl Mount {
         let (roll, pitch, yaw) = Rotation3::from_matrix_unchecked(r).euler_angles();
         Attitude { yaw, pitch, roll }
     }
+
+    /// The inverse of [`Mount::equivalent_nadir_attitude`]: the body's attitude from
+    /// its camera's equivalent nadir attitude, `C_n^b(body) = C_n^b(equivalent) ·
+    /// C_b^c(nadir) · C_b^c(mount)ᵀ`. The estimator takes the AHRS's errors off the
+    /// body's angles through it: that is where the AHRS errs. Singular only for a body
+    /// pitched ±90°.
+    pub fn body_attitude(self, equivalent: Attitude) -> Attitude {
+        let r =
+            body_to_ned(equivalent) * nadir_camera_to_body() * self.camera_to_body().transpose();
+        let (roll, pitch, yaw) = Rotation3::from_matrix_unchecked(r).euler_angles();
+        Attitude { yaw, pitch, roll }
+    }
+
+    /// Whether this is the nadir mount exactly (the body's attitude is its camera's).
+    pub fn is_nadir(self) -> bool {
+        self == Mount::NADIR
+    }
 }
 
 /// `C_w^c` of eq. (1): rotation taking camera-frame vectors to the world (ENU) frame for
@@ -314,6 +331,21 @@ mod tests {
     }
 
     #[test]
+    fn the_body_comes_back_from_the_equivalent_attitude() {
+        let body = Attitude::from_degrees(-140.0, 6.0, -4.0);
+        for mount in [
+            Mount::NADIR,
+            Mount::from_degrees(0.0, -45.0, 0.0),
+            Mount::from_degrees(35.0, -30.0, 2.0),
+        ] {
+            let back = mount.body_attitude(mount.equivalent_nadir_attitude(body));
+            assert_close!(body_to_ned(back), body_to_ned(body), 1e-12);
+            assert!((wrap_angle(back.yaw - body.yaw)).abs() < 1e-12);
+        }
+        assert!(Mount::NADIR.is_nadir() && !Mount::from_degrees(0.0, -45.0, 0.0).is_nadir());
+    }
+
+    #[test]
     fn a_camera_pitched_forward_looks_ahead_of_the_uav() {
         // Level, nose north, camera 30° forward of straight down.
         let mount = Mount::from_degrees(0.0, -60.0, 0.0);
@@ -335,6 +367,7 @@ mod tests {
             let eq = mount.equivalent_nadir_attitude(body);
             let textbook = ned_to_enu() * body_to_ned(body) * mount.camera_to_body();
             prop_assert!((camera_to_world(eq) - textbook).norm() < 1e-9);
+            prop_assert!((body_to_ned(mount.body_attitude(eq)) - body_to_ned(body)).norm() < 1e-9);
         }
 
         #[test]

@@ -30,10 +30,58 @@ impl PixelFormat {
     }
 }
 
+/// A camera's mount on its body ([`Mount`], recording format v2's gimbal angles of G
+/// relative to the body), in degrees. The default is the nadir mount.
+#[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
+#[repr(C)]
+#[type_name("dualgeo::MountSample/v1")]
+pub struct MountSample {
+    pub yaw_deg: f64,
+    pub pitch_deg: f64,
+    pub roll_deg: f64,
+}
+
+impl Default for MountSample {
+    fn default() -> Self {
+        Self::from_mount(Mount::NADIR)
+    }
+}
+
+impl MountSample {
+    pub fn from_mount(mount: Mount) -> Self {
+        let a = mount.0;
+        Self {
+            yaw_deg: a.yaw.to_degrees(),
+            pitch_deg: a.pitch.to_degrees(),
+            roll_deg: a.roll.to_degrees(),
+        }
+    }
+
+    /// Back to radians; the nadir mount exactly for the default (so a nadir camera's
+    /// attitude is taken as its body's to the last bit).
+    pub fn mount(&self) -> Mount {
+        if *self == Self::default() {
+            Mount::NADIR
+        } else {
+            Mount::from_degrees(self.yaw_deg, self.pitch_deg, self.roll_deg)
+        }
+    }
+
+    pub fn is_finite(&self) -> bool {
+        [self.yaw_deg, self.pitch_deg, self.roll_deg]
+            .iter()
+            .all(|v| v.is_finite())
+    }
+}
+
 /// A measured navigation state as recorded (telemetry.csv): ENU metres and degrees.
+/// Once a camera's mount is applied ([`PoseSample::on_mount`]) the attitude is the
+/// camera's equivalent nadir attitude and `mount` says through which mount it was
+/// turned (the estimator takes the AHRS's errors off the body's angles through it);
+/// a body's own sample, or a nadir camera's, has the nadir mount.
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
 #[repr(C)]
-#[type_name("dualgeo::PoseSample/v1")]
+#[type_name("dualgeo::PoseSample/v2")]
 pub struct PoseSample {
     pub x_m: f64,
     pub y_m: f64,
@@ -41,6 +89,7 @@ pub struct PoseSample {
     pub yaw_deg: f64,
     pub pitch_deg: f64,
     pub roll_deg: f64,
+    pub mount: MountSample,
 }
 
 impl PoseSample {
@@ -55,12 +104,14 @@ impl PoseSample {
     /// The pose of a camera on `mount` when this is its body's: the same position, the
     /// attitude turned into the equivalent nadir camera's
     /// ([`Mount::equivalent_nadir_attitude`]; the yaw bias carries over).
+    /// `mount` is recorded in the sample.
     pub fn on_mount(self, mount: Mount) -> PoseSample {
         let a = mount.equivalent_nadir_attitude(self.attitude());
         PoseSample {
             yaw_deg: a.yaw.to_degrees(),
             pitch_deg: a.pitch.to_degrees(),
             roll_deg: a.roll.to_degrees(),
+            mount: MountSample::from_mount(mount),
             ..self
         }
     }
@@ -76,13 +127,14 @@ impl PoseSample {
         ]
         .iter()
         .all(|v| v.is_finite())
+            && self.mount.is_finite()
     }
 }
 
 /// User header of a frame sample; the payload is `stride × height` bytes of pixels.
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
 #[repr(C)]
-#[type_name("dualgeo::FrameHeader/v4")]
+#[type_name("dualgeo::FrameHeader/v5")]
 pub struct FrameHeader {
     /// Per-UAV frame index (the pair index: left and right frames of one instant share it).
     pub seq: u64,
@@ -186,7 +238,7 @@ impl DetectionMsg {
 /// One image of an observation set: the measured pose and the target's pixel.
 #[derive(Debug, Clone, Copy, Default, PartialEq, ZeroCopySend)]
 #[repr(C)]
-#[type_name("dualgeo::ObservationEntry/v4")]
+#[type_name("dualgeo::ObservationEntry/v5")]
 pub struct ObservationEntry {
     /// 0 = left, 1 = right.
     pub uav: u8,
@@ -282,7 +334,7 @@ pub struct PoseNoise {
 /// `entries[1]` the current right one, then `count − 2` past images.
 #[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
 #[repr(C)]
-#[type_name("dualgeo::ObservationSetMsg/v10")]
+#[type_name("dualgeo::ObservationSetMsg/v11")]
 pub struct ObservationSetMsg {
     /// Index of this set among the sets matching published (gaps = sets lost).
     pub set_seq: u64,
@@ -494,12 +546,14 @@ mod tests {
             std::mem::size_of::<EstimateMsg>(),
             264 + 8 + 88 * MAX_TRACKS
         );
-        assert_eq!(std::mem::size_of::<ObservationEntry>(), 168);
+        // The pose: 6·8 + the mount's 3·8.
+        assert_eq!(std::mem::size_of::<PoseSample>(), 72);
+        assert_eq!(std::mem::size_of::<ObservationEntry>(), 192);
         assert_eq!(std::mem::size_of::<OtherTarget>(), 32 + 16 * 30 + 16);
         assert_eq!(std::mem::size_of::<PoseNoise>(), 6 * 8 + 8 + 4 + 4);
         assert_eq!(
             std::mem::size_of::<ObservationSetMsg>(),
-            56 + 168 * MAX_OBSERVATIONS + 8 + 528 * MAX_OTHER_TARGETS + 2 * 64
+            56 + 192 * MAX_OBSERVATIONS + 8 + 528 * MAX_OTHER_TARGETS + 2 * 64
         );
         let set = ObservationSetMsg {
             count: 99,
@@ -543,9 +597,9 @@ mod tests {
 
     #[test]
     fn header_layout_is_stable() {
-        // 8+8+8+8 + 1+3+4 + 4+4+4+4 + 6·8 + 4·8 + 5·8 (distortion) = 176 bytes, 8-aligned,
-        // no hidden padding.
-        assert_eq!(std::mem::size_of::<FrameHeader>(), 176);
+        // 8+8+8+8 + 1+3+4 + 4+4+4+4 + (6+3)·8 (pose and mount) + 4·8 + 5·8 (distortion)
+        // = 200 bytes, 8-aligned, no hidden padding.
+        assert_eq!(std::mem::size_of::<FrameHeader>(), 200);
         assert_eq!(std::mem::align_of::<FrameHeader>(), 8);
     }
 }

@@ -330,7 +330,7 @@ mod tests {
     #[test]
     fn frame_segment_size_follows_the_formula() {
         assert_eq!(FRAME_SEGMENT_SAMPLES, 3 * (2 + 2) + 2);
-        assert_eq!(frame_segment_bytes(1000), 14 * (1000 + 48 + 176));
+        assert_eq!(frame_segment_bytes(1000), 14 * (1000 + 48 + 200));
     }
 
     /// Every file under `dirs` (recursively), with its permission bits.

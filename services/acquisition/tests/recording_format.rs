@@ -63,6 +63,7 @@ fn write_valid() -> (TempDir, PathBuf) {
                 yaw_deg: 1.93,
                 pitch_deg: 0.52,
                 roll_deg: -0.1 / 3.0,
+                mount: Default::default(),
             };
             let truth = TruthSample {
                 pose: PoseSample {

@@ -47,6 +47,7 @@ fn pose(k: u32) -> PoseSample {
         yaw_deg: 10.0 + k as f64,
         pitch_deg: 1.5,
         roll_deg: -2.0,
+        mount: Default::default(),
     }
 }
 
@@ -121,6 +122,11 @@ fn a_fixed_mount_round_trips_and_reads_as_its_equivalent_nadir_camera() {
                     mount.equivalent_nadir_attitude(row.pose.attitude()),
                 );
                 assert!((camera.pitch_deg - row.pose.pitch_deg).abs() > 20.0);
+                assert_eq!(
+                    camera.mount.mount(),
+                    mount,
+                    "the mount travels with the pose"
+                );
             }
             Uav::Right => assert_eq!(camera, row.pose, "a nadir camera's pose is the row's"),
         }

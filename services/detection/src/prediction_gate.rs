@@ -312,6 +312,7 @@ mod tests {
                 yaw_deg: 0.0,
                 pitch_deg: 0.0,
                 roll_deg: 0.0,
+                mount: Default::default(),
             },
             intrinsics: Intrinsics::new(554.26, 554.26, 319.5, 239.5),
             distortion: Distortion::default(),

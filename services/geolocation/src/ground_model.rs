@@ -172,6 +172,7 @@ mod tests {
             uav: Uav::Left,
             position: Point3::from(pos),
             attitude: Attitude::from_degrees(att[0], att[1], att[2]),
+            mount: shared_types::conventions::Mount::NADIR,
             pixel: Vector2::from(px),
             intrinsics: Intrinsics::new(554.26, 550.0, 319.5, 239.5),
         }

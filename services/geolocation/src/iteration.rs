@@ -374,6 +374,7 @@ mod tests {
                     uav,
                     position,
                     attitude: measured,
+                    mount,
                     pixel,
                     intrinsics: k,
                 });

@@ -41,6 +41,7 @@ mod tests {
             uav: Uav::Left,
             position,
             attitude,
+            mount: shared_types::conventions::Mount::NADIR,
             pixel: k.project(cam).unwrap(),
             intrinsics: k,
         };

@@ -412,6 +412,7 @@ pub(crate) mod tests {
             uav,
             position: nalgebra::Point3::new(0.0, 0.0, 100.0),
             attitude: shared_types::conventions::Attitude::new(0.0, 0.0, 0.0),
+            mount: shared_types::conventions::Mount::NADIR,
             pixel: nalgebra::Vector2::new(320.0, 240.0),
             intrinsics: shared_types::conventions::Intrinsics::new(554.0, 554.0, 319.5, 239.5),
         };

@@ -90,6 +90,7 @@ mod tests {
                 pitch: 0.0,
                 roll: 0.0,
             },
+            mount: shared_types::conventions::Mount::NADIR,
             pixel: Vector2::new(pixel[0], pixel[1]),
             intrinsics: Intrinsics::from_hfov(640, 480, 60.0),
         }

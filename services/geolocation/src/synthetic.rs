@@ -175,8 +175,16 @@ impl SyntheticScenario {
         if self.camera_tilt_deg == 0.0 {
             body
         } else {
+            self.mount().equivalent_nadir_attitude(body)
+        }
+    }
+
+    /// The camera's mount: nadir, or fixed `camera_tilt_deg` forward of it.
+    pub fn mount(&self) -> Mount {
+        if self.camera_tilt_deg == 0.0 {
+            Mount::NADIR
+        } else {
             Mount::from_degrees(0.0, self.camera_tilt_deg - 90.0, 0.0)
-                .equivalent_nadir_attitude(body)
         }
     }
 
@@ -240,6 +248,7 @@ impl SyntheticScenario {
                     attitude.pitch + sample(&att_noise[1]),
                     attitude.roll + sample(&att_noise[2]),
                 )),
+                mount: self.mount(),
                 pixel: pixel + Vector2::new(sample(&px_noise), sample(&px_noise)),
                 intrinsics: self.intrinsics,
             });

@@ -14,7 +14,7 @@ use nalgebra::Point3;
 use opencv::core as cv;
 use shared_types::conventions::{Intrinsics, Uav};
 use shared_types::lens::Distortion;
-use shared_types::messages::PoseSample;
+use shared_types::messages::{MountSample, PoseSample};
 use std::sync::Arc;
 
 /// One keyframe: its measured state and its features.
@@ -25,6 +25,8 @@ pub struct KeyframeSnapshot {
     pub t_s: f64,
     /// x, y, z (m), yaw, pitch, roll (°), as measured.
     pub pose: [f64; 6],
+    /// The camera's mount, yaw, pitch, roll (°) ([`MountSample`]).
+    pub mount: [f64; 3],
     pub baseline_position: [f64; 3],
     pub intrinsics: Intrinsics,
     pub distortion: [f64; 5],
@@ -53,6 +55,7 @@ impl KeyframeSnapshot {
             seq: kf.seq,
             t_s: kf.t_s,
             pose: [p.x_m, p.y_m, p.z_m, p.yaw_deg, p.pitch_deg, p.roll_deg],
+            mount: [p.mount.yaw_deg, p.mount.pitch_deg, p.mount.roll_deg],
             baseline_position: kf.baseline_position.coords.into(),
             intrinsics: kf.intrinsics,
             distortion: kf.distortion.0,
@@ -67,6 +70,7 @@ impl KeyframeSnapshot {
     pub fn keyframe(&self) -> Result<Keyframe, String> {
         let finite = self.t_s.is_finite()
             && self.pose.iter().all(|v| v.is_finite())
+            && self.mount.iter().all(|v| v.is_finite())
             && self.baseline_position.iter().all(|v| v.is_finite())
             && self.distortion.iter().all(|v| v.is_finite())
             && self.points.iter().flatten().all(|v| v.is_finite());
@@ -107,6 +111,11 @@ impl KeyframeSnapshot {
                 yaw_deg,
                 pitch_deg,
                 roll_deg,
+                mount: MountSample {
+                    yaw_deg: self.mount[0],
+                    pitch_deg: self.mount[1],
+                    roll_deg: self.mount[2],
+                },
             },
             baseline_position: Point3::from(self.baseline_position),
             intrinsics: self.intrinsics,
@@ -189,6 +198,7 @@ pub(crate) mod tests {
             seq,
             t_s: seq as f64 / 30.0,
             pose: [1.0, 2.0, 100.0, 10.0, 0.5, -0.5],
+            mount: [5.0, -45.0, 0.5],
             baseline_position: [1.0, 2.0, 100.0],
             intrinsics: Intrinsics::new(500.0, 500.0, 320.0, 240.0),
             distortion: [0.0; 5],
@@ -215,6 +225,9 @@ pub(crate) mod tests {
         let mut s = snapshot(1);
         s.descriptors.pop();
         assert!(s.keyframe().unwrap_err().contains("descriptors"));
+        let mut s = snapshot(1);
+        s.mount[1] = f64::NAN;
+        assert!(s.keyframe().is_err());
         let mut s = snapshot(1);
         s.width = 0;
         assert!(s.keyframe().is_err());

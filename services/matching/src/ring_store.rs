@@ -12,7 +12,9 @@ use shared_types::conventions::Uav;
 use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};
 
-pub const KEYFRAME_KIND: u32 = 3;
+/// 5 since keyframes carry their camera's mount: a store of kind 3 (before it) is
+/// refused and matching starts fresh.
+pub const KEYFRAME_KIND: u32 = 5;
 pub const INDEX_KIND: u32 = 4;
 
 pub struct RingStore {

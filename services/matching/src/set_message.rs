@@ -151,6 +151,7 @@ mod tests {
                 pitch: 0.0,
                 roll: 0.0,
             },
+            mount: shared_types::conventions::Mount::NADIR,
             pixel: Vector2::new(u, 240.0),
             intrinsics: Intrinsics {
                 fx: 500.0,

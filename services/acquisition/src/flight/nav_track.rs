@@ -19,7 +19,7 @@
 use super::tlog::NavSample;
 use crate::recording::Origin;
 use shared_types::conventions::{body_to_ned, Attitude, Mount};
-use shared_types::messages::PoseSample;
+use shared_types::messages::{MountSample, PoseSample};
 
 /// Samples this close to a frame's time are taken as taken at it (the autopilot clock
 /// is in milliseconds).
@@ -221,6 +221,7 @@ impl NavTrack {
             pitch_deg: r[1].to_degrees(),
             // ATTITUDE's yaw is in (−π, π]; the project's in degrees, any turn.
             yaw_deg: r[2].to_degrees(),
+            mount: MountSample::default(),
         };
         if self.gimbals.is_empty() {
             return Ok(body);

@@ -5,7 +5,7 @@
 use super::error::CsvPlace;
 use super::RecordingError;
 use shared_types::conventions::Uav;
-use shared_types::messages::PoseSample;
+use shared_types::messages::{MountSample, PoseSample};
 use std::io::Read;
 use std::path::Path;
 
@@ -194,6 +194,7 @@ impl Fields<'_> {
             yaw_deg: self.number(first + 3)?,
             pitch_deg: self.number(first + 4)?,
             roll_deg: self.number(first + 5)?,
+            mount: MountSample::default(),
         })
     }
 }

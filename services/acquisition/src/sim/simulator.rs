@@ -15,7 +15,7 @@ use rand::SeedableRng;
 use rand_distr::Distribution;
 use shared_types::conventions::{camera_to_world, wrap_angle, Attitude, Intrinsics, Mount, Uav};
 use shared_types::lens::Distortion;
-use shared_types::messages::PoseSample;
+use shared_types::messages::{MountSample, PoseSample};
 use shared_types::nav_noise::NavErrorState;
 use std::sync::Arc;
 
@@ -581,5 +581,6 @@ fn pose(x: f64, y: f64, z: f64, a: Attitude) -> PoseSample {
         yaw_deg: wrap_angle(a.yaw).to_degrees(),
         pitch_deg: a.pitch.to_degrees(),
         roll_deg: a.roll.to_degrees(),
+        mount: MountSample::default(),
     }
 }

@@ -168,13 +168,33 @@ fn measured(config: &SimConfig, step: Option<BiasStep>, image: &ImageRef) -> (Po
             bias += s.step_deg[image.uav.index()].to_radians();
         }
     }
+    // The AHRS errs on the body's angles: a mounted camera's equivalent attitude is
+    // turned back to its body's, the errors drawn there, the mount applied again.
+    let mount = p.mount.mount();
+    let body = if mount.is_nadir() {
+        *p
+    } else {
+        let a = mount.body_attitude(p.attitude());
+        PoseSample {
+            yaw_deg: a.yaw.to_degrees(),
+            pitch_deg: a.pitch.to_degrees(),
+            roll_deg: a.roll.to_degrees(),
+            ..*p
+        }
+    };
     let pose = PoseSample {
-        x_m: p.x_m + draw(n.sigma_position_m[0]),
-        y_m: p.y_m + draw(n.sigma_position_m[1]),
-        z_m: p.z_m + draw(n.sigma_position_m[2]),
-        yaw_deg: p.yaw_deg + bias.to_degrees() + draw(n.sigma_attitude_deg[0]),
-        pitch_deg: p.pitch_deg + draw(n.sigma_attitude_deg[1]),
-        roll_deg: p.roll_deg + draw(n.sigma_attitude_deg[2]),
+        x_m: body.x_m + draw(n.sigma_position_m[0]),
+        y_m: body.y_m + draw(n.sigma_position_m[1]),
+        z_m: body.z_m + draw(n.sigma_position_m[2]),
+        yaw_deg: body.yaw_deg + bias.to_degrees() + draw(n.sigma_attitude_deg[0]),
+        pitch_deg: body.pitch_deg + draw(n.sigma_attitude_deg[1]),
+        roll_deg: body.roll_deg + draw(n.sigma_attitude_deg[2]),
+        mount: p.mount,
+    };
+    let pose = if mount.is_nadir() {
+        pose
+    } else {
+        pose.on_mount(mount)
     };
     (pose, bias)
 }
@@ -186,6 +206,7 @@ fn observation(config: &SimConfig, step: Option<BiasStep>, image: &ImageRef) -> 
             uav: image.uav,
             position: pose.position(),
             attitude: pose.attitude(),
+            mount: pose.mount.mount(),
             pixel: Vector2::new(image.pixel[0], image.pixel[1]),
             intrinsics: image.intrinsics,
         },

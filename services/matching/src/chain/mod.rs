@@ -494,6 +494,7 @@ impl VisionChain {
                 uav,
                 position: pose.position(),
                 attitude: pose.attitude(),
+                mount: pose.mount.mount(),
                 pixel: Vector2::new(pixel[0], pixel[1]),
                 intrinsics,
             };
