@@ -131,7 +131,14 @@ fn locate_relative(
         persistent_xy,
         altitude_bias_sensitivity: jz,
         persistent_z_var,
-        altitude_std_error_m: fix.altitude_std_error_m.hypot(msg.altitude_std_error_m),
+        // The difference's own scatter: both windows' (eq. 22). The target's altitude
+        // error is in every fix alike and stated apart (`persistent_z_var`); counted
+        // here too, a track averaged its fixes as if each were that noisy and kept
+        // the target's early error for seconds.
+        altitude_std_error_m: fix
+            .altitude_std_error_m
+            .hypot(reference.altitude_std_error_m),
+        reference_z: Some(msg.position[2]),
         colour_bgr: Some(std::array::from_fn(|c| {
             (f64::from(other.bgr[0][c]) + f64::from(other.bgr[1][c])) / 2.0
         })),

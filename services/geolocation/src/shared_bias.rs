@@ -60,6 +60,11 @@ pub struct OtherFix {
     pub persistent_z_var: f64,
     /// Standard error of z (eq. 22 residuals), metres.
     pub altitude_std_error_m: f64,
+    /// The altitude its z is relative to, m: for a vehicle located relative to the
+    /// target, the target's estimate at this pair (z is that plus the two windows'
+    /// difference, so the target's error moves every such fix alike); `None` for a
+    /// vehicle located alone.
+    pub reference_z: Option<f64>,
     /// Its colour (BGR, the two views' mean), when known: appearance for
     /// re-identification.
     pub colour_bgr: Option<[f64; 3]>,
@@ -149,6 +154,7 @@ pub fn locate_with_biases(
         altitude_bias_sensitivity: [kz.x, kz.y],
         persistent_z_var: kz.dot(&(covariance * kz)),
         altitude_std_error_m: altitude.std_error_m,
+        reference_z: None,
         colour_bgr: None,
     };
     let finite = fix.position.iter().all(|v| v.is_finite())

@@ -383,6 +383,7 @@ fn tracks_snapshot() -> geolocation::tracks::TracksSnapshot {
         altitude_bias_sensitivity: [4.0, -6.0],
         persistent_z_var: 0.4,
         altitude_std_error_m: 0.5,
+        reference_z: Some(14.0),
         colour_bgr: Some([0.0, 200.0, 220.0]),
     };
     // The third goes out of view after 5 pairs; its track is deleted 3 s later.
