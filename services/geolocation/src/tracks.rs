@@ -235,6 +235,10 @@ const REID_COLOUR_GATE: f64 = 60.0;
 /// slowed, kept on, or turned at a crossing).
 const REID_SLACK_M: f64 = 10.0;
 const REID_SLACK_MPS: f64 = 1.0;
+/// A confirmed track without a fix for this long, s, may be taken over by a newly
+/// confirmed one where its vehicle could have driven (as re-identification does for a
+/// deleted track): 15 pairs at 30 Hz, well past a fix's usual gaps.
+const TAKEOVER_AFTER_S: f64 = 0.5;
 /// Weight of a new fix's colour in a track's running mean.
 const COLOUR_ALPHA: f64 = 0.1;
 
@@ -686,6 +690,22 @@ impl Tracks {
         let mut next_id = self.next_id;
         self.lost.retain(|l| t_s - l.last_fix_s <= c.reid_after_s);
         let lost = &mut self.lost;
+        // Confirmed tracks without a fix for `TAKEOVER_AFTER_S`, as re-identification
+        // sees a deleted one: a newly confirmed track where one of them could have
+        // driven is that vehicle back, its old track having coasted off it (`multi_town`
+        // seed 8: a car that slowed while hidden came back 16 m behind its coasting
+        // track; a new id for 0.6 s until the old track took its fixes again, two
+        // identity switches). The new track takes its id, the old one goes.
+        let mut coasting: Vec<Lost> = if c.reid_after_s > 0.0 {
+            self.tracks
+                .iter()
+                .filter(|t| t.id != 0 && t_s - t.last_fix_s >= TAKEOVER_AFTER_S)
+                .filter_map(lost_from)
+                .collect()
+        } else {
+            Vec::new()
+        };
+        let mut taken_over: Vec<(u32, f64)> = Vec::new();
         let mut deleted = Vec::new();
         self.tracks.retain_mut(|t| {
             if t.id == 0 {
@@ -697,6 +717,11 @@ impl Tracks {
                         t.id = old.id;
                         t.moved = old.moved;
                         counts.reidentified += 1;
+                    } else if let Some(old) = reidentify(&mut coasting, t, t_s) {
+                        t.id = old.id;
+                        t.moved = old.moved;
+                        counts.reidentified += 1;
+                        taken_over.push((old.id, old.last_fix_s));
                     } else {
                         t.id = next_id;
                         next_id = next_id.saturating_add(1);
@@ -710,21 +735,19 @@ impl Tracks {
             let sigma = (t.p[(0, 0)] + t.p[(1, 1)]).sqrt();
             let keep = t_s - t.last_fix_s <= c.delete_after_s && sigma <= c.delete_sigma_m;
             counts.deleted += u64::from(!keep);
-            if let (false, Some(colour), true) = (keep, t.colour, c.reid_after_s > 0.0) {
-                // Its state at its last fix (it has coasted at constant velocity since).
-                let velocity = Vector2::new(t.x[2], t.x[3]);
-                let since = t.t_s - t.last_fix_s;
-                deleted.push(Lost {
-                    id: t.id,
-                    position: Vector2::new(t.x[0], t.x[1]) - velocity * since,
-                    velocity,
-                    last_fix_s: t.last_fix_s,
-                    colour,
-                    moved: t.moved,
-                });
+            if let (false, Some(l), true) = (keep, lost_from(t), c.reid_after_s > 0.0) {
+                deleted.push(l);
             }
             keep
         });
+        // The tracks a new one took over are gone, not deleted and remembered.
+        let gone = |id: u32, last_fix_s: f64| {
+            taken_over
+                .iter()
+                .any(|&(i, s)| i == id && s.to_bits() == last_fix_s.to_bits())
+        };
+        self.tracks.retain(|t| !gone(t.id, t.last_fix_s));
+        deleted.retain(|l| !gone(l.id, l.last_fix_s));
         self.lost.extend(deleted);
         let most = most_kept(&c);
         if self.lost.len() > most {
@@ -842,6 +865,21 @@ fn reidentify(lost: &mut Vec<Lost>, track: &Track, t_s: f64) -> Option<Lost> {
         })
         .min_by(|a, b| a.1.total_cmp(&b.1))?;
     Some(lost.swap_remove(best.0))
+}
+
+/// A confirmed track as re-identification remembers it: its state at its last fix (it
+/// has coasted at constant velocity since). `None` without a colour.
+fn lost_from(t: &Track) -> Option<Lost> {
+    let velocity = Vector2::new(t.x[2], t.x[3]);
+    let since = t.t_s - t.last_fix_s;
+    Some(Lost {
+        id: t.id,
+        position: Vector2::new(t.x[0], t.x[1]) - velocity * since,
+        velocity,
+        last_fix_s: t.last_fix_s,
+        colour: t.colour?,
+        moved: t.moved,
+    })
 }
 
 /// Whether `track` moves: speed at least `min_speed` and its velocity nonzero at 99 %
@@ -1320,6 +1358,37 @@ mod tests {
         assert_eq!(run((-40.0, 70.0)), vec![1]);
         // 79 m from its last fix, but 76 m behind it.
         assert_eq!(run((-20.0, -40.0)), vec![1, 2]);
+    }
+
+    /// A vehicle that slowed while hidden comes back behind its coasting track, out of
+    /// its gate, before that track is deleted: the new track takes the old one's id and
+    /// the old one goes (one track, one id), not a second id beside a coasting track.
+    #[test]
+    fn a_vehicle_that_slowed_while_hidden_keeps_its_id() {
+        let run = |takeover: bool| {
+            let config = TrackConfig {
+                reid_after_s: if takeover { 10.0 } else { 0.0 },
+                ..TrackConfig::default()
+            };
+            let mut tracks = Tracks::new(config).unwrap();
+            let mut ids = std::collections::BTreeSet::new();
+            for k in 0..(12.0 / DT) as usize {
+                let t = k as f64 * DT;
+                // North at 12 m/s for 5 s, hidden for 2.5 s while it brakes, then seen
+                // 24 m behind where its track coasted, driving on at 4 m/s.
+                let fixes = match t {
+                    t if t < 5.0 => vec![fix(0.0, 12.0 * t)],
+                    t if t < 7.5 => vec![],
+                    _ => vec![fix(0.0, 66.0 + 4.0 * (t - 7.5))],
+                };
+                ids.extend(tracks.update(t, &fixes, None).iter().map(|r| r.id));
+            }
+            let confirmed = tracks.tracks.iter().filter(|t| t.id != 0).count();
+            (ids.into_iter().collect::<Vec<_>>(), confirmed)
+        };
+        assert_eq!(run(true), (vec![1], 1));
+        // Without (re-identification off): a second id while the first coasts.
+        assert_eq!(run(false).0, vec![1, 2]);
     }
 
     /// The deleted tracks remembered are capped (a long `reid_after_s` on a busy road),
