@@ -66,7 +66,8 @@ pub struct TrackConfig {
     /// track, parked cars too).
     pub min_speed_mps: f64,
     /// A deleted track is remembered this long, s (0: never): a new track of its
-    /// colour where it could have driven takes its id back (re-identification).
+    /// colour where it could have driven takes its id back (re-identification), as it
+    /// takes over a confirmed track that has had no fix for 0.5 s (0: neither).
     pub reid_after_s: f64,
     /// Ask the other vehicles of each pair whether the target's detections are a
     /// tracked vehicle's, and coast the target's filter when they are
@@ -174,7 +175,7 @@ pub struct TrackCounts {
     pub target_fixes: u64,
     /// Confirmed tracks that took a fix again after coasting.
     pub reacquired: u64,
-    /// New tracks that took a deleted track's id back.
+    /// New tracks that took a deleted track's id back, or a long-coasting one's over.
     pub reidentified: u64,
 }
 
