@@ -714,15 +714,15 @@ impl Tracks {
                 t.pairs = t.pairs.saturating_add(1);
                 if t.hits.count_ones() >= c.confirm_hits {
                     counts.confirmed += 1;
-                    if let Some(old) = reidentify(lost, t, t_s) {
-                        t.id = old.id;
-                        t.moved = old.moved;
-                        counts.reidentified += 1;
-                    } else if let Some(old) = reidentify(&mut coasting, t, t_s) {
-                        t.id = old.id;
-                        t.moved = old.moved;
-                        counts.reidentified += 1;
+                    let back = reidentify(lost, t, t_s).or_else(|| {
+                        let old = reidentify(&mut coasting, t, t_s)?;
                         taken_over.push((old.id, old.last_fix_s));
+                        Some(old)
+                    });
+                    if let Some(old) = back {
+                        t.id = old.id;
+                        t.moved = old.moved;
+                        counts.reidentified += 1;
                     } else {
                         t.id = next_id;
                         next_id = next_id.saturating_add(1);
@@ -736,8 +736,8 @@ impl Tracks {
             let sigma = (t.p[(0, 0)] + t.p[(1, 1)]).sqrt();
             let keep = t_s - t.last_fix_s <= c.delete_after_s && sigma <= c.delete_sigma_m;
             counts.deleted += u64::from(!keep);
-            if let (false, Some(l), true) = (keep, lost_from(t), c.reid_after_s > 0.0) {
-                deleted.push(l);
+            if !keep && c.reid_after_s > 0.0 {
+                deleted.extend(lost_from(t));
             }
             keep
         });
