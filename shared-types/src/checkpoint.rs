@@ -18,8 +18,8 @@ const MAGIC: &[u8; 4] = b"DGCK";
 /// holds the other vehicles' tracks; 3: geolocation's and matching's hold the stream
 /// segment; 4: each track holds the persistent part of its error; 5: the tracks' colours
 /// and the deleted tracks remembered for re-identification; 6: each track's own noise
-/// scale; 7: each track's altitude reference).
-pub const VERSION: u32 = 7;
+/// scale; 7: each track's altitude reference; 8: a track's motion on trial).
+pub const VERSION: u32 = 8;
 const HEADER: usize = 12;
 
 #[derive(Debug, thiserror::Error)]

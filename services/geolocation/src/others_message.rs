@@ -12,7 +12,8 @@
 //! with other vehicles but no valid target estimate to take the biases from),
 //! `others_skipped` (vehicles of a pair whose target detections were another's),
 //! `tracks_confirmed`, `tracks_deleted`, `tracks_tentative_dropped`,
-//! `tracks_reacquired`, `tracks_reidentified`, `tracks_target_fixes`.
+//! `tracks_reacquired`, `tracks_reidentified`, `tracks_target_fixes`,
+//! `tracks_unreported_static`.
 
 use crate::shared_bias::{locate_with_biases, OtherFix, SharedBiases};
 use crate::target_identity::{log_likelihood_ratios, IdentityCheck};
@@ -281,6 +282,7 @@ fn put_reports(
         ("tracks_tentative_dropped", c.tentative_dropped),
         ("tracks_reacquired", c.reacquired),
         ("tracks_reidentified", c.reidentified),
+        ("tracks_unreported_static", c.unreported_static),
         ("tracks_target_fixes", c.target_fixes),
     ] {
         if n > 0 {
