@@ -220,7 +220,8 @@ struct Track {
     hits: u32,
     pairs: u32,
     updated: bool,
-    /// It has been seen moving (reported from then on).
+    /// It has been seen moving (reported while so; on trial until `moved_from` is
+    /// `None`: [`motion_on_trial`]).
     moved: bool,
     /// While its motion is on trial: when and where it was first seen moving,
     /// (t, x, y); `None` once its fixes have taken it `min_travel_m` from there.
