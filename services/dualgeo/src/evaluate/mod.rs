@@ -109,8 +109,8 @@ pub struct EvaluateArgs {
     /// or quieter than the filter is told.
     #[arg(long, requires = "monte_carlo", value_parser = parse_sensor_noise)]
     pub sensor_noise: Option<(f64, f64)>,
-    /// Only several targets over seeds (issue #26): `multi_town` and `suite_traffic` (or
-    /// `--scenes`) over `--scene-seeds` seeds (default 8; 2 with --quick) through
+    /// Only several targets over seeds (issue #26): `multi_town`, `suite_traffic` and
+    /// `multi_crawl` (or `--scenes`) over `--scene-seeds` seeds (default 8; 2 with --quick) through
     /// `dualgeo run` and `dualgeo score`; `--mc-duration-s` shortens the runs. Writes
     /// OUT/multi-target-seeds.md and OUT/multi-target-seeds.json; runs are kept in
     /// OUT/multi-target-seeds/runs/ and reused.
@@ -408,7 +408,11 @@ pub fn run(args: &EvaluateArgs) -> Result<()> {
     if args.multi_target {
         let plan = multi_target::Plan {
             scenes: if args.scenes.is_empty() {
-                vec!["multi_town".to_string(), "suite_traffic".to_string()]
+                vec![
+                    "multi_town".to_string(),
+                    "suite_traffic".to_string(),
+                    "multi_crawl".to_string(),
+                ]
             } else {
                 args.scenes.clone()
             },
