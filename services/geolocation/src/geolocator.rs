@@ -186,6 +186,9 @@ impl Geolocator {
                 &self.effective,
                 stats,
                 !coast,
+                self.temporal
+                    .as_ref()
+                    .and_then(|t| t.pose_errors_at(set.t_s)),
             );
         }
         msg

@@ -25,6 +25,35 @@ pub struct PastImage {
     pub rotation_from: [Option<Vector3<f64>>; 2],
 }
 
+/// What the temporal filter knows of the pose errors of the images of its last
+/// update: the leading hypothesis's posterior mean of each image's error `e` (x, y,
+/// z, yaw, pitch, roll; measured = true + e, as [`Observation::pose_without_error`]
+/// takes it), the current pair's before they are marginalised and each keyframe's
+/// slot (a UAV's correlated block added where it has one). Beyond the paper: the other
+/// vehicles are located through the same images (`others_message.rs`), and a
+/// keyframe's error, reused by many pairs, is what their fixes could not average.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct ImagePoseErrors {
+    /// The time of the update, seconds (the set's `t_s`).
+    pub t_s: f64,
+    /// The current (left, right) images', where the update had them.
+    pub current: [Option<[f64; 6]>; 2],
+    /// Each keyframe's that had a slot.
+    pub past: Vec<(ImageId, [f64; 6])>,
+}
+
+impl ImagePoseErrors {
+    /// The error of the current image of `uav`.
+    pub fn of_current(&self, uav: Uav) -> Option<[f64; 6]> {
+        self.current[uav.index()]
+    }
+
+    /// The error of past image `id`.
+    pub fn of_past(&self, id: ImageId) -> Option<[f64; 6]> {
+        self.past.iter().find(|(i, _)| *i == id).map(|(_, e)| *e)
+    }
+}
+
 /// One image `g_k`: the measured state γ of its UAV when it was taken and the pixel of
 /// the target's *current* position P in it (from detection for the current images,
 /// from corresponding-point matching for past ones).
@@ -86,6 +115,21 @@ impl Observation {
             self.position.z - e[2],
         );
         (position, att)
+    }
+
+    /// This image with the pose error `e` removed from its measured pose (its yaw
+    /// bias left in): what its pose would be had the navigation erred by nothing but
+    /// the bias. Non-finite errors leave it as it is.
+    pub fn with_pose_error_removed(&self, e: &[f64; 6]) -> Observation {
+        if !e.iter().all(|v| v.is_finite()) {
+            return *self;
+        }
+        let (position, attitude) = self.pose_without_error([0.0; 2], e);
+        Observation {
+            position,
+            attitude,
+            ..*self
+        }
     }
 
     /// Checks that every number is finite and the intrinsics are usable.

@@ -57,6 +57,7 @@
 
 use crate::hypotheses::{bias_grid, prune_and_merge, spread_about, weights, BiasStart, Hypothesis};
 use crate::joint::{reproject, Theta};
+use crate::observation::ImagePoseErrors;
 use crate::start_agreement::{agree, StartCandidate, START_CONSENSUS};
 use crate::start_prior::{meeting_prior, split_where_curved, ImageNoise, MeetingPrior};
 use crate::{Estimate, EstimatorConfig, EstimatorError, NoiseModel, Observation, PastImage};
@@ -139,6 +140,8 @@ pub struct TemporalEstimate {
     /// target re-acquired after both cameras' rays left the prediction).
     pub reopened: bool,
     pub quality: Quality,
+    /// The posterior pose errors of this update's images (the leading hypothesis's).
+    pub pose_errors: ImagePoseErrors,
 }
 
 /// The filter's tuning (in `EstimatorConfig`).
@@ -344,6 +347,9 @@ pub struct TemporalEstimator {
     pub(crate) bank: Vec<Hypothesis>,
     /// Before the start: the last sets' candidates (`start_agreement.rs`).
     pub(crate) start_candidates: Vec<StartCandidate>,
+    /// The last update's images' pose errors ([`TemporalEstimator::pose_errors_at`]);
+    /// not checkpointed (the next update makes them anew).
+    pose_errors: Option<ImagePoseErrors>,
 }
 
 /// The filter's prediction of the target and its biases at one time
@@ -613,6 +619,7 @@ impl TemporalEstimator {
             config,
             bank: Vec::new(),
             start_candidates: Vec::new(),
+            pose_errors: None,
         })
     }
 
@@ -620,6 +627,13 @@ impl TemporalEstimator {
     pub fn reset(&mut self) {
         self.bank.clear();
         self.start_candidates.clear();
+        self.pose_errors = None;
+    }
+
+    /// What the update at `t_s` (the last one) made of its images' pose errors; `None`
+    /// when the last update was at another time, coasted or failed.
+    pub fn pose_errors_at(&self, t_s: f64) -> Option<&ImagePoseErrors> {
+        self.pose_errors.as_ref().filter(|e| e.t_s == t_s)
     }
 
     /// Both UAVs' noise models from now on: the σ's measured from the telemetry
@@ -1016,6 +1030,7 @@ impl TemporalEstimator {
             }));
         }
         let out = self.mixture(&kept, outs);
+        self.pose_errors = (!coast).then(|| out.pose_errors.clone());
         // Hypotheses that agree on the target and both biases are one: their bias
         // rates, observed over many seconds, are left out of the comparison (merging
         // moment-matches them, their spread kept in the covariance).
@@ -1673,6 +1688,24 @@ impl TemporalEstimator {
             p = (&pn + pn.transpose()) * 0.5;
             s = s_iter;
         }
+        // What the update made of each image's pose error, before the current pair's
+        // go: its rays' own (their UAV's correlated block added) and each keyframe's.
+        let error_of = |ray: &Ray| -> [f64; 6] {
+            std::array::from_fn(|k| s[ray.slot + k] + ray.gm.map_or(0.0, |g| s[g + k]))
+        };
+        let mut pose_errors = ImagePoseErrors {
+            t_s,
+            ..ImagePoseErrors::default()
+        };
+        for ray in &rays[..current_rays] {
+            pose_errors.current[ray.obs.uav.index()] = Some(error_of(ray));
+        }
+        pose_errors.past = hypothesis
+            .slots
+            .iter()
+            .enumerate()
+            .map(|(k, id)| (*id, std::array::from_fn(|j| s[core + SLOT * k + j])))
+            .collect();
         // Marginalise the current pair's pose errors.
         let s = s.rows(0, kept).into_owned();
         let p = p.view((0, 0), (kept, kept)).into_owned();
@@ -1707,6 +1740,7 @@ impl TemporalEstimator {
             rays_rejected: rays.len() - accepted.len(),
             reopened,
             quality,
+            pose_errors,
         };
         for (i, ld) in log_det.iter().enumerate() {
             if !gated_in.contains(&i) {
@@ -1778,6 +1812,40 @@ mod tests {
             t += dt;
         }
         out
+    }
+
+    /// Every update says what it made of its images' pose errors (the other
+    /// vehicles' fixes remove them, `others_message.rs`): the current pair's and every
+    /// keyframe's, at the update's time; without navigation noise they are all near
+    /// zero (yaw within 0.1°), and with it (σ_att 2°) some image's yaw is not.
+    #[test]
+    fn each_update_says_what_it_made_of_its_images_pose_errors() {
+        let quiet = SyntheticScenario {
+            noise: NavNoise::NONE,
+            ..SyntheticScenario::default()
+        };
+        for (scenario, noisy) in [(quiet, false), (SyntheticScenario::default(), true)] {
+            let run = fly(&scenario, 10.0, 4);
+            let (t, last, _, _) = run.last().unwrap();
+            let e = &last.pose_errors;
+            assert_eq!(e.t_s, *t);
+            assert!(e.current.iter().all(Option::is_some), "{e:?}");
+            assert!(!e.past.is_empty(), "{e:?}");
+            let all = e
+                .current
+                .iter()
+                .flatten()
+                .chain(e.past.iter().map(|(_, v)| v));
+            let largest_yaw = all.map(|v| v[3].abs()).fold(0.0, f64::max).to_degrees();
+            assert!(
+                if noisy {
+                    largest_yaw > 0.5
+                } else {
+                    largest_yaw < 0.1
+                },
+                "{largest_yaw}° ({noisy})"
+            );
+        }
     }
 
     /// Issue #23: with the current pair's pose noise in its covariance the altitude sat

@@ -77,11 +77,13 @@ pub struct EvaluateArgs {
     /// Seeds of every other scene (default 8; 2 with --quick).
     #[arg(long)]
     pub scene_seeds: Option<u64>,
-    /// Monte Carlo: the first seed of every scene (default 1). Seeds beyond the
-    /// committed report's (e.g. `--first-seed 21 --seeds 8 --scene-seeds 8`) are a
-    /// held-out set: flights no change was tuned on.
-    #[arg(long, default_value_t = 1, requires = "monte_carlo")]
-    pub first_seed: u64,
+    /// Monte Carlo and several targets: the first seed of every scene (default 1).
+    /// Seeds beyond the committed report's (e.g. `--first-seed 21 --seeds 8
+    /// --scene-seeds 8`) are a held-out set: flights no change was tuned on. Refused
+    /// without `--monte-carlo` or `--multi-target` (`requires` is not enough: clap
+    /// does not check it against a defaulted argument).
+    #[arg(long)]
+    pub first_seed: Option<u64>,
     /// Navigation-error models to run under (default: both).
     #[arg(long, value_delimiter = ',', value_enum)]
     pub nav: Vec<monte_carlo::NavModel>,
@@ -268,6 +270,7 @@ pub const STEP_DEG: f64 = 15.0;
 fn run_monte_carlo(args: &EvaluateArgs) -> Result<()> {
     let started = Instant::now();
     let quick = args.quick;
+    let first_seed = args.first_seed.unwrap_or(1);
     let seeds = args.seeds.unwrap_or(if quick { 3 } else { 20 }).max(1);
     let scene_seeds = args.scene_seeds.unwrap_or(if quick { 2 } else { 8 }).max(1);
     let scenes: Vec<(String, u64)> = if args.scenes.is_empty() {
@@ -295,7 +298,7 @@ fn run_monte_carlo(args: &EvaluateArgs) -> Result<()> {
     let dir = args.out.join("monte-carlo");
     let plan = monte_carlo::Plan {
         scenes,
-        first_seed: args.first_seed,
+        first_seed,
         nav: if args.nav.is_empty() {
             vec![
                 monte_carlo::NavModel::White,
@@ -334,7 +337,7 @@ fn run_monte_carlo(args: &EvaluateArgs) -> Result<()> {
     let seconds = started.elapsed().as_secs_f64();
     std::fs::create_dir_all(&dir).with_context(|| format!("create {}", dir.display()))?;
     let section = mc_report::section(&all, duration_s, every, flown, seconds);
-    let (title, command) = if args.first_seed == 1 {
+    let (title, command) = if first_seed == 1 {
         ("Monte Carlo evaluation (issue #23)", String::new())
     } else {
         // A held-out set names its own seeds, so the line regenerates it, not the report.
@@ -353,7 +356,7 @@ fn run_monte_carlo(args: &EvaluateArgs) -> Result<()> {
             "Monte Carlo evaluation on held-out seeds (issue #23)",
             format!(
                 " --first-seed {} --seeds {seeds} --scene-seeds {scene_seeds}{nav}{crf} --out {}",
-                args.first_seed,
+                first_seed,
                 args.out.display()
             ),
         )
@@ -405,6 +408,12 @@ fn run_monte_carlo(args: &EvaluateArgs) -> Result<()> {
 }
 
 pub fn run(args: &EvaluateArgs) -> Result<()> {
+    if args.first_seed == Some(0) {
+        anyhow::bail!("--first-seed starts at 1");
+    }
+    if args.first_seed.is_some() && !(args.monte_carlo || args.multi_target) {
+        anyhow::bail!("--first-seed needs --monte-carlo or --multi-target");
+    }
     if args.multi_target {
         let plan = multi_target::Plan {
             scenes: if args.scenes.is_empty() {
@@ -416,6 +425,7 @@ pub fn run(args: &EvaluateArgs) -> Result<()> {
             } else {
                 args.scenes.clone()
             },
+            first_seed: args.first_seed.unwrap_or(1),
             seeds: args.scene_seeds.unwrap_or(if args.quick { 2 } else { 8 }),
             duration_s: args.mc_duration_s,
             warm_up_s: 2.0,
