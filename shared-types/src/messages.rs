@@ -334,7 +334,7 @@ pub struct PoseNoise {
 /// `entries[1]` the current right one, then `count − 2` past images.
 #[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
 #[repr(C)]
-#[type_name("dualgeo::ObservationSetMsg/v11")]
+#[type_name("dualgeo::ObservationSetMsg/v12")]
 pub struct ObservationSetMsg {
     /// Index of this set among the sets matching published (gaps = sets lost).
     pub set_seq: u64,
@@ -351,8 +351,10 @@ pub struct ObservationSetMsg {
     /// two vehicles and could not be mended (matching's pair check): the set holds the
     /// current images only, and no estimate may take its rays (the filter publishes its
     /// prediction). [`ObservationSetMsg::TARGET_UNSEEN`] (2): a current image has no
-    /// target detection (hidden, say): no entries; geolocation reports the other
-    /// vehicles' tracks, predicted, and no target estimate. 0 otherwise.
+    /// target detection (hidden, say): no target estimate; either no entries (the
+    /// other vehicles' tracks are predicted) or, when both images show other vehicles,
+    /// the images as entries with the target's pixels (0, 0), never read, and the
+    /// vehicles in `others` (geolocation locates them alone). 0 otherwise.
     pub refused: u32,
     pub entries: [ObservationEntry; MAX_OBSERVATIONS],
     /// Valid entries of `others`.

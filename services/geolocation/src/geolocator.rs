@@ -12,9 +12,12 @@
 //! doubt); in all three the filter's prediction is published, the set's rays untaken;
 //! `sets_noise_raised` (sets estimated with a UAV's navigation noise raised to what its
 //! pose samples show, [`crate::telemetry_noise`]); `sets_target_unseen` (a camera did
-//! not find the target: no target estimate, the other vehicles' tracks predicted).
+//! not find the target: no target estimate, the other vehicles' tracks predicted or,
+//! after `[tracks] alone_after_s`, the vehicles located alone).
 
-use crate::others_message::{add_coasted_tracks, add_tracks, detection_identity};
+use crate::others_message::{
+    add_coasted_tracks, add_tracks, add_unseen_tracks, detection_identity,
+};
 use crate::set_message::{coast_message, estimate_message, unestimated};
 use crate::target_identity::IdentityCheck;
 use crate::telemetry_noise::{MeasuredNoise, NoiseRaise};
@@ -42,6 +45,9 @@ pub struct Geolocator {
     /// `config` with each UAV's noise raised to what its pose samples show
     /// (`[estimator] noise_from_telemetry`); what every estimate is made with.
     effective: EstimatorConfig,
+    /// The last set with the target's detections in both images, s: how long it has
+    /// been hidden (`[tracks] alone_after_s`). Not checkpointed.
+    target_seen_s: Option<f64>,
 }
 
 impl Geolocator {
@@ -60,6 +66,7 @@ impl Geolocator {
             identity: IdentityCheck::default(),
             raise: NoiseRaise::new(),
             effective: config,
+            target_seen_s: None,
         }
     }
 
@@ -121,6 +128,7 @@ impl Geolocator {
         // that every pass of a loop gives the same estimates.
         self.raise = NoiseRaise::new();
         self.effective = self.config;
+        self.target_seen_s = None;
         if let Some(t) = self.temporal.as_mut() {
             if let Err(e) = t.set_noise(self.config.noise_left, self.config.noise_right) {
                 tracing::warn!("configured noise not restored: {e}");
@@ -133,6 +141,7 @@ impl Geolocator {
         if set.refused == ObservationSetMsg::TARGET_UNSEEN {
             return self.target_unseen(set, stats);
         }
+        self.target_seen_s = Some(set.t_s);
         self.measure_noise(set, stats);
         let track_config = self.track_config;
         // The other vehicles say whether the target's detections are one of them
@@ -194,10 +203,14 @@ impl Geolocator {
         msg
     }
 
-    /// A pair whose target a camera did not find (hidden): no target estimate, the
-    /// other vehicles' tracks predicted to it. Nothing of the filter, the tracks, the
+    /// A pair whose target a camera did not find (hidden): no target estimate; once
+    /// the target has been hidden `[tracks] alone_after_s`, the other vehicles it
+    /// carries located alone (`add_unseen_tracks`), before that the tracks predicted
+    /// to it (`add_coasted_tracks`: a short gap, under a bridge, is bridged better by
+    /// the tracks' predictions than by fixes metres off). Nothing of the filter, the
     /// measured noise or the identity check's gap changes, so the target's estimates
-    /// are the same as without such pairs.
+    /// are the same as without such pairs as long as the tracks' word on its
+    /// detections is.
     fn target_unseen(&mut self, set: &ObservationSetMsg, stats: &mut StageStats) -> EstimateMsg {
         stats.count("sets_target_unseen", 1);
         let mut msg = EstimateMsg {
@@ -205,7 +218,19 @@ impl Geolocator {
             ..unestimated(set)
         };
         if self.track_config.enabled && set.t_s.is_finite() {
-            add_coasted_tracks(set.t_s, &mut msg, &mut self.tracks, stats);
+            let hidden_for = self.target_seen_s.map(|t| set.t_s - t);
+            if hidden_for.is_some_and(|h| h >= self.track_config.alone_after_s) {
+                add_unseen_tracks(
+                    set,
+                    &mut msg,
+                    &mut self.tracks,
+                    self.temporal.as_ref(),
+                    &self.effective,
+                    stats,
+                );
+            } else {
+                add_coasted_tracks(set.t_s, &mut msg, &mut self.tracks, stats);
+            }
         }
         msg
     }

@@ -68,6 +68,13 @@ pub struct OtherFix {
     /// Its colour (BGR, the two views' mean), when known: appearance for
     /// re-identification.
     pub colour_bgr: Option<[f64; 3]>,
+    /// Its covariance is its error's as stated: a vehicle located alone, whose
+    /// images' GPS and attitude errors cancel against nothing. The tracks take it
+    /// unscaled and learn no noise scale from it (their learnt scale is that of fixes
+    /// relative to the target, whose stated covariance holds errors the difference
+    /// cancels), and only into a confirmed track whose gate it falls in: it starts
+    /// no track, and leaves the track's altitude (its own is metres off).
+    pub as_stated: bool,
 }
 
 /// Smallest bias variance used, rad² (0.01°): keeps the prior's information finite
@@ -156,6 +163,7 @@ pub fn locate_with_biases(
         altitude_std_error_m: altitude.std_error_m,
         reference_z: None,
         colour_bgr: None,
+        as_stated: true,
     };
     let finite = fix.position.iter().all(|v| v.is_finite())
         && fix.covariance_xy.iter().all(|v| v.is_finite())

@@ -636,6 +636,13 @@ impl TemporalEstimator {
         self.pose_errors.as_ref().filter(|e| e.t_s == t_s)
     }
 
+    /// What the last update made of its images' pose errors, whenever it was: its
+    /// keyframes' errors stay theirs while they are in the window (a pair without the
+    /// target, `others_message::add_unseen_tracks`). `None` when it coasted or failed.
+    pub fn last_pose_errors(&self) -> Option<&ImagePoseErrors> {
+        self.pose_errors.as_ref()
+    }
+
     /// Both UAVs' noise models from now on: the σ's measured from the telemetry
     /// (`telemetry_noise`, raised where the pose samples are noisier than configured).
     /// Only σ's may change: the error model's time constants decide the state's

@@ -173,6 +173,11 @@ pub struct MatchingConfig {
     /// ... and their colours differ by at most this much per channel (0–255; 255
     /// turns the colour test off).
     pub others_colour_gate: f64,
+    /// A pair whose target a current image did not find (hidden under a bridge, say)
+    /// still has its past images fitted when both images show other vehicles, and
+    /// those are paired and carried into them as on any pair (`chain/others.rs`,
+    /// `others_unseen`); false: such a pair carries no vehicle.
+    pub others_when_unseen: bool,
     /// The target's two current detections are one vehicle only if the left one,
     /// carried by the ground homography between the two images, lands within this
     /// angle of the right one, milliradians (× the right camera's focal length in
@@ -227,6 +232,7 @@ impl Default for MatchingConfig {
             track_ransac_px: 1.0,
             others_gate_px: 12.0,
             others_colour_gate: 60.0,
+            others_when_unseen: true,
             target_pair_gate_mrad: 29.0,
         }
     }

@@ -13,7 +13,7 @@ use crate::chain::{MatchOutcome, MatchedSet, OthersOutcome};
 use crate::frame::{ChainCounts, FrameInput, FrameMeta, Others};
 use crate::frame_tracking::{FrameTracker, Observed, TrackReport};
 use crate::ring_store::RingStore;
-use crate::set_message::{matched_set, refused_set, unseen_set, SetHeader};
+use crate::set_message::{matched_set, refused_set, unseen_set, unseen_set_with_others, SetHeader};
 use crate::{ChainTiming, MatchingConfig, VisionChain};
 use anyhow::Result;
 use detection::frame_view::frame_mat;
@@ -412,6 +412,19 @@ impl Intake {
                 self.stats.count("no_detection", 1);
                 Some(unseen_set(&header))
             }
+            // The other vehicles of a pair without the target, through its past
+            // images (`chain/others.rs`).
+            MatchOutcome::TargetUnseen(unseen) => {
+                self.stats.count("no_detection", 1);
+                let others = self.chain.others_unseen([&ml, &mr], &unseen);
+                self.count_others(&others);
+                let msg = unseen_set_with_others(&header, &unseen, &others);
+                if msg.other_count > 0 {
+                    self.stats
+                        .count("others_unseen", u64::from(msg.other_count));
+                }
+                Some(msg)
+            }
             MatchOutcome::NotEnoughHistory { .. } => {
                 self.stats.count("warming_up", 1);
                 None
@@ -476,13 +489,18 @@ impl Intake {
     /// `others_no_geometry`; `others` and `others_dropped` once in the message).
     fn others(&mut self, current: [&FrameMeta; 2], matched: &MatchedSet) -> OthersOutcome {
         let outcome = self.chain.others(current, matched);
+        self.count_others(&outcome);
+        outcome
+    }
+
+    /// Counts `others_no_geometry` and `others_unpaired`.
+    fn count_others(&mut self, outcome: &OthersOutcome) {
         if outcome.no_geometry {
             self.stats.count("others_no_geometry", 1);
         }
         if outcome.unpaired > 0 {
             self.stats.count("others_unpaired", outcome.unpaired as u64);
         }
-        outcome
     }
 
     /// Saves newly admitted keyframes (called after the sets are published).

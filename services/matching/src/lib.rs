@@ -29,7 +29,7 @@ pub mod set_message;
 
 pub use chain::{
     estimate_matched, extract_undistorted, ChainCounts, ChainOutcome, ChainResult, ChainTiming,
-    FrameInput, FrameMeta, Located, MatchOutcome, MatchedSet, PastMatch, VisionChain,
+    FrameInput, FrameMeta, Located, MatchOutcome, MatchedSet, PastMatch, UnseenSet, VisionChain,
 };
 pub use config::{FundamentalMethod, MatchingConfig, OrbScore, UsacLocalOptimisation, UsacScore};
 pub use frame_tracking::{FrameTracker, Motion, Observed, TrackReport};

@@ -3,8 +3,8 @@
 //! the same message so that its geolocation is the service's own
 //! (`geolocation::geolocator`).
 
-use crate::chain::MatchedSet;
 use crate::chain::OthersOutcome;
+use crate::chain::{MatchedSet, UnseenSet};
 use geolocation::Observation;
 use shared_types::messages::{
     ObservationSetMsg, OtherTarget, PoseNoise, MAX_OBSERVATIONS, MAX_OTHER_TARGETS,
@@ -56,6 +56,25 @@ pub fn refused_set(header: &SetHeader, current: &[Observation; 2]) -> Observatio
 /// they went unreported for as long as the target was hidden).
 pub fn unseen_set(header: &SetHeader) -> ObservationSetMsg {
     header.message(ObservationSetMsg::TARGET_UNSEEN)
+}
+
+/// A pair without the target's detection whose past images were fitted all the same
+/// and whose other vehicles were paired (`others`, not empty): marked
+/// `TARGET_UNSEEN`, with its images as entries (the target's pixels (0, 0), unknown:
+/// geolocation reads only the vehicles') and the vehicles. Without vehicles,
+/// [`unseen_set`].
+pub fn unseen_set_with_others(
+    header: &SetHeader,
+    unseen: &UnseenSet,
+    others: &OthersOutcome,
+) -> ObservationSetMsg {
+    if others.targets.is_empty() {
+        return unseen_set(header);
+    }
+    ObservationSetMsg {
+        refused: ObservationSetMsg::TARGET_UNSEEN,
+        ..matched_set(header, &unseen.set, others)
+    }
 }
 
 /// A matched pair: its current and past observations and the other vehicles paired

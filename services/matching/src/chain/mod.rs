@@ -62,6 +62,34 @@ pub enum MatchOutcome {
     /// (`chain::target_pair`): no set to estimate from; the current observations, so
     /// that the service can say so downstream (a refused set: the filter coasts).
     TargetPairMismatch(Box<[Observation; 2]>),
+    /// A current image has no target detection but both show other vehicles: the
+    /// past images fitted without it, for the other vehicles
+    /// ([`VisionChain::others_unseen`]).
+    TargetUnseen(Box<UnseenSet>),
+}
+
+/// A pair without the target in a current image, its past images fitted all the
+/// same: `set` has the images (the target's pixels (0, 0), unknown) and every past
+/// image whose two fits held (the matches' `pixel` NaN).
+#[derive(Debug, Clone, PartialEq)]
+pub struct UnseenSet {
+    pub set: MatchedSet,
+    /// The ground homographies from the current left image to the current right one
+    /// through each past image both sides were fitted to (`H_R⁻¹ · H_L`), the most
+    /// inliers first (as `ground_homographies` for a matched pair).
+    pub left_to_right: Vec<Matrix3<f64>>,
+}
+
+/// `H_R⁻¹ · H_L` of each past image with both homographies, the most inliers first
+/// (equal counts: the last first, as [`VisionChain::ground_homographies`] orders).
+fn left_to_right_through(fits: Vec<(usize, [Option<Matrix3<f64>>; 2])>) -> Vec<Matrix3<f64>> {
+    let mut all: Vec<(usize, Matrix3<f64>)> = fits
+        .into_iter()
+        .filter_map(|(inliers, [hl, hr])| Some((inliers, hr?.try_inverse()? * hl?)))
+        .collect();
+    all.sort_by_key(|(inliers, _)| *inliers);
+    all.reverse();
+    all.into_iter().map(|(_, h)| h).collect()
 }
 
 /// The consistency filter and the iteration on a matched set (filtered), and the
@@ -221,6 +249,10 @@ pub struct VisionChain {
     landings: VecDeque<LandingReport>,
     /// The stream segment (`FrameHeader::segment`) the trackers and rings are of.
     pub(crate) segment: u32,
+    /// The target's residual under the ground homography from the current left image
+    /// to the right one on the last pair that had one, px: the shift the other
+    /// vehicles are paired with on a pair without the target (`others.rs`).
+    last_target_shift: Option<[f64; 2]>,
     /// The white noise of each UAV's pose samples over the frames given to
     /// [`VisionChain::match_current`] (`geolocation::telemetry_noise`; every set
     /// carries it, [`VisionChain::pose_noise`]).
@@ -254,6 +286,7 @@ impl VisionChain {
             landed_admissions: [false; 2],
             landings: VecDeque::new(),
             segment: 0,
+            last_target_shift: None,
             telemetry: TelemetryNoise::new(),
             config,
             estimator,
@@ -288,6 +321,7 @@ impl VisionChain {
         self.steps.clear();
         self.landed_admissions = [false; 2];
         self.landings.clear();
+        self.last_target_shift = None;
         self.segment = segment;
         Ok(())
     }
@@ -361,7 +395,7 @@ impl VisionChain {
         let matched =
             self.match_current([&left, &right], &mut observed, &mut timing, &mut rejections)?;
         let outcome = match matched {
-            MatchOutcome::NoDetection => ChainOutcome::NoDetection,
+            MatchOutcome::NoDetection | MatchOutcome::TargetUnseen(_) => ChainOutcome::NoDetection,
             MatchOutcome::NotEnoughHistory { past } => ChainOutcome::NotEnoughHistory { past },
             MatchOutcome::TargetPairMismatch(_) => ChainOutcome::TargetPairMismatch,
             MatchOutcome::Matched(set) => {
@@ -466,15 +500,24 @@ impl VisionChain {
             let [u, v] = f.detection?;
             f.distortion.undistort_pixel(&f.intrinsics, u, v)
         };
-        let (Some(pl), Some(pr)) = (undistorted(current[0]), undistorted(current[1])) else {
-            let lost = current
-                .iter()
-                .filter(|f| f.detection.is_some() && undistorted(f).is_none())
-                .count();
-            self.counts.detections_outside_lens += lost as u64;
-            return Ok(MatchOutcome::NoDetection);
+        let detections = match (undistorted(current[0]), undistorted(current[1])) {
+            (Some(pl), Some(pr)) => Some([pl, pr]),
+            _ => {
+                let lost = current
+                    .iter()
+                    .filter(|f| f.detection.is_some() && undistorted(f).is_none())
+                    .count();
+                self.counts.detections_outside_lens += lost as u64;
+                // Without the target the past images are still fitted when both
+                // current images show other vehicles: they are located through them
+                // (`TargetUnseen`).
+                let others_on_both = current.iter().all(|f| !f.others.as_slice().is_empty());
+                if !(self.config.others_when_unseen && others_on_both) {
+                    return Ok(MatchOutcome::NoDetection);
+                }
+                None
+            }
         };
-        let detections = [pl, pr];
         let wanted = self.config.images_per_uav - 1;
         let positions =
             [Uav::Left, Uav::Right].map(|uav| self.baseline_position(uav, current[uav.index()]));
@@ -484,6 +527,9 @@ impl VisionChain {
             rings[uav.index()].select(&positions[uav.index()], frame.seq, wanted)
         });
         if selected.iter().any(|s| s.len() < wanted) {
+            if detections.is_none() {
+                return Ok(MatchOutcome::NoDetection);
+            }
             return Ok(MatchOutcome::NotEnoughHistory {
                 past: [selected[0].len(), selected[1].len()],
             });
@@ -498,9 +544,12 @@ impl VisionChain {
                 pixel: Vector2::new(pixel[0], pixel[1]),
                 intrinsics,
             };
+        // Without the target its pixels are unknown: (0, 0), never read
+        // (`TargetUnseen`).
+        let pixels = detections.unwrap_or([[0.0; 2]; 2]);
         let current_obs = [Uav::Left, Uav::Right].map(|uav| {
             let f = current[uav.index()];
-            observation(uav, &f.pose, detections[uav.index()], f.intrinsics)
+            observation(uav, &f.pose, pixels[uav.index()], f.intrinsics)
         });
 
         // Every selected past image is independent: split them over
@@ -580,6 +629,9 @@ impl VisionChain {
         let mut past = Vec::new();
         let mut past_obs = Vec::new();
         let mut new_priors: Vec<(PriorKey, f64, Matrix3<f64>)> = Vec::new();
+        // Without the target: each fitted past image's (fewer side's inliers, both
+        // sides' ground homographies), for pairing the other vehicles.
+        let mut unseen_ground: Vec<(usize, [Option<Matrix3<f64>>; 2])> = Vec::new();
         let mut counts = ChainCounts::default();
         let mut steps = Vec::new();
         for ((uav, kf), r) in jobs.iter().zip(results) {
@@ -606,7 +658,15 @@ impl VisionChain {
             }
             match r.result {
                 Ok(m) => {
-                    past_obs.push(observation(*uav, &kf.pose, m.pixel, kf.intrinsics));
+                    let pixel = if detections.is_some() {
+                        m.pixel
+                    } else {
+                        [0.0; 2]
+                    };
+                    past_obs.push(observation(*uav, &kf.pose, pixel, kf.intrinsics));
+                    if detections.is_none() {
+                        unseen_ground.push((m.inliers[0].min(m.inliers[1]), r.homographies));
+                    }
                     past.push(m);
                 }
                 Err(reason) => rejections.push((*uav, kf.seq, reason)),
@@ -615,6 +675,11 @@ impl VisionChain {
 
         self.counts += counts;
         self.steps = steps;
+        // A pair without the target leaves the priors as they were, so that the
+        // target's own matching after it is what it was without such pairs.
+        if detections.is_none() {
+            new_priors.clear();
+        }
         for (key, t_s, homography) in new_priors {
             self.priors
                 .entry(key)
@@ -639,6 +704,12 @@ impl VisionChain {
             past,
             mended: None,
         };
+        if detections.is_none() {
+            return Ok(MatchOutcome::TargetUnseen(Box::new(UnseenSet {
+                left_to_right: left_to_right_through(unseen_ground),
+                set,
+            })));
+        }
         if self.config.target_pair_gate_mrad > 0.0 {
             match self.check_target_pair(current, &mut set) {
                 target_pair::PairCheck::Consistent => {}

@@ -12,9 +12,15 @@
 //! within `others_gate_px`, their colours within `others_colour_gate` per channel.
 //! The measured poses are not used: a 20° yaw bias moves a ground point by tens of
 //! metres, while the homography is fitted on the images themselves.
+//!
+//! **Without the target (a choice).** A pair whose target a current image did not
+//! find (under a bridge) has its past images fitted all the same
+//! ([`super::MatchOutcome::TargetUnseen`]), so the homography is there; its shift is
+//! the target's residual on the last pair that had one (the roof-height parallax
+//! changes as slowly as the UAVs' geometry; within a stream segment), none before.
 
 use super::target_pair::apply;
-use super::{MatchedSet, VisionChain};
+use super::{MatchedSet, UnseenSet, VisionChain};
 use crate::frame::FrameMeta;
 use nalgebra::Matrix3;
 use shared_types::assignment;
@@ -93,7 +99,31 @@ impl VisionChain {
     /// The other objects of `current` (as detection found them) paired across the
     /// views and carried into the past images of `matched` (the target's set on this
     /// pair, just matched by [`VisionChain::match_current`]).
-    pub fn others(&self, current: [&FrameMeta; 2], matched: &MatchedSet) -> OthersOutcome {
+    pub fn others(&mut self, current: [&FrameMeta; 2], matched: &MatchedSet) -> OthersOutcome {
+        let left_to_right = self.left_to_right(current, matched);
+        if let Some((_, shift)) = left_to_right {
+            self.last_target_shift = Some(shift);
+        }
+        self.others_through(current, matched, left_to_right.map(|(h, _)| h))
+    }
+
+    /// The other objects of a pair whose target a current image did not find, paired
+    /// through its past images' homography shifted by the last target residual, and
+    /// carried into those past images (module docs).
+    pub fn others_unseen(&self, current: [&FrameMeta; 2], unseen: &UnseenSet) -> OthersOutcome {
+        let left_to_right = unseen.left_to_right.first().map(|h| {
+            let [dx, dy] = self.last_target_shift.unwrap_or([0.0; 2]);
+            Matrix3::new(1.0, 0.0, dx, 0.0, 1.0, dy, 0.0, 0.0, 1.0) * h
+        });
+        self.others_through(current, &unseen.set, left_to_right)
+    }
+
+    fn others_through(
+        &self,
+        current: [&FrameMeta; 2],
+        matched: &MatchedSet,
+        left_to_right: Option<Matrix3<f64>>,
+    ) -> OthersOutcome {
         let mut out = OthersOutcome::default();
         let mut sides: [Vec<Seen>; 2] = current.map(|f| {
             f.others
@@ -122,7 +152,7 @@ impl VisionChain {
             out.unpaired = sides[0].len() + sides[1].len();
             return out;
         }
-        let Some(left_to_right) = self.left_to_right(current, matched) else {
+        let Some(left_to_right) = left_to_right else {
             out.no_geometry = true;
             out.unpaired = sides[0].len() + sides[1].len();
             return out;
@@ -151,14 +181,14 @@ impl VisionChain {
     }
 
     /// The ground homography from the current left image to the current right one
-    /// (the first of [`VisionChain::ground_homographies`]) shifted by the target's residual;
-    /// `None` without one or when the target lies more than
-    /// [`MAX_TARGET_RESIDUAL_PX`] off it.
+    /// (the first of [`VisionChain::ground_homographies`]) shifted by the target's
+    /// residual, and that shift; `None` without one or when the target lies more
+    /// than [`MAX_TARGET_RESIDUAL_PX`] off it.
     fn left_to_right(
         &self,
         current: [&FrameMeta; 2],
         matched: &MatchedSet,
-    ) -> Option<Matrix3<f64>> {
+    ) -> Option<(Matrix3<f64>, [f64; 2])> {
         let h = *self.ground_homographies(current, matched).first()?;
         let target = [0, 1].map(|side| {
             let p = matched.current[side].pixel;
@@ -170,7 +200,7 @@ impl VisionChain {
             return None;
         }
         let translate = Matrix3::new(1.0, 0.0, shift[0], 0.0, 1.0, shift[1], 0.0, 0.0, 1.0);
-        Some(translate * h)
+        Some((translate * h, shift))
     }
 }
 

@@ -36,13 +36,16 @@ pub(super) struct PastResult {
 /// Eq. (24)–(28) for one past image: F_Ln from the current left image, F_Rn from the
 /// current right one, and the intersection of the two epipolar lines. A side with a
 /// prior homography is matched guided first, and by brute force if that fit fails.
+/// Without `detections` (the target unseen in a current image) the fits alone: the
+/// match's `pixel` is NaN, for the other vehicles' transfers only (never in a
+/// [`super::MatchedSet`]).
 #[allow(clippy::too_many_arguments)]
 pub(super) fn match_past(
     config: &MatchingConfig,
     uav: Uav,
     kf: &Keyframe,
     current: &[FrameMeta; 2],
-    detections: [[f64; 2]; 2],
+    detections: Option<[[f64; 2]; 2]>,
     features: &[Option<Arc<Features>>; 2],
     guides: &[Guide; 2],
     neighbours: &mut Vec<Option<crate::hamming::Nearest2>>,
@@ -124,23 +127,29 @@ pub(super) fn match_past(
         out.steps.push(step("past", job_start));
         return out;
     };
-    let t = Instant::now();
-    let t_ns = monotonic_ns();
-    let pixel = transfer_point(
-        &gl.f,
-        detections[0],
-        &gr.f,
-        detections[1],
-        &ImageBounds {
-            intrinsics: &kf.intrinsics,
-            distortion: &kf.distortion,
-            width: kf.width,
-            height: kf.height,
-        },
-        config,
-    );
-    out.timing.transfer_us += micros(t);
-    out.steps.push(step("transfer", t_ns));
+    let pixel = match detections {
+        Some(detections) => {
+            let t = Instant::now();
+            let t_ns = monotonic_ns();
+            let pixel = transfer_point(
+                &gl.f,
+                detections[0],
+                &gr.f,
+                detections[1],
+                &ImageBounds {
+                    intrinsics: &kf.intrinsics,
+                    distortion: &kf.distortion,
+                    width: kf.width,
+                    height: kf.height,
+                },
+                config,
+            );
+            out.timing.transfer_us += micros(t);
+            out.steps.push(step("transfer", t_ns));
+            pixel
+        }
+        None => Ok([f64::NAN; 2]),
+    };
     out.steps.push(step("past", job_start));
     out.result = pixel.map(|pixel| PastMatch {
         uav,
