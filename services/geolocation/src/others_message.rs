@@ -43,11 +43,13 @@ fn biases_of(msg: &EstimateMsg) -> Option<SharedBiases> {
 /// The observations of vehicle `other` (the set's images with its pixels, where its
 /// transfer reached) and the target's through the same images, each image's pose
 /// error as the target's filter estimated it removed (`pose_errors`, where it has
-/// the image). `None` when an entry or pixel is bad.
+/// the image; the current images' only `with_current`: an earlier update's are
+/// another pair's). `None` when an entry or pixel is bad.
 fn observations_of(
     set: &ObservationSetMsg,
     other: &OtherTarget,
     pose_errors: Option<&ImagePoseErrors>,
+    with_current: bool,
 ) -> Option<(Vec<Observation>, Vec<Observation>)> {
     let entries = set.entries();
     if entries.len() < 2 {
@@ -66,7 +68,7 @@ fn observations_of(
         }
         let o = Observation::from_entry(e, i).ok()?;
         let error = pose_errors.and_then(|p| match i {
-            0 | 1 => p.of_current(o.uav),
+            0 | 1 => p.of_current(o.uav).filter(|_| with_current),
             _ => p.of_past((o.uav, e.frame_seq)),
         });
         let o = error.map_or(o, |e| o.with_pose_error_removed(&e));
@@ -115,7 +117,7 @@ fn locate_relative(
     pose_errors: Option<&ImagePoseErrors>,
     config: &EstimatorConfig,
 ) -> Result<OtherFix, &'static str> {
-    let (theirs, target) = observations_of(set, other, pose_errors).ok_or("bad_input")?;
+    let (theirs, target) = observations_of(set, other, pose_errors, true).ok_or("bad_input")?;
     let fix = locate_with_biases(&theirs, biases, config).map_err(|e| e.kind())?;
     let reference = locate_with_biases(&target, biases, config).map_err(|e| e.kind())?;
     let c = &msg.covariance;
@@ -180,7 +182,7 @@ pub fn relative_offsets(
     set.others()
         .iter()
         .filter_map(|other| {
-            let (theirs, target) = observations_of(set, other, None)?;
+            let (theirs, target) = observations_of(set, other, None, true)?;
             let a = locate_with_biases(&theirs, biases, config).ok()?;
             let b = locate_with_biases(&target, biases, config).ok()?;
             let d = a.position - b.position;
@@ -296,8 +298,8 @@ fn keep_fix(
 
 /// Vehicle `other` located alone through the images of `set` (a pair without the
 /// target), with the filter's predicted `biases` and each past image's pose error
-/// as the filter's last update estimated it removed (`pose_errors`: the keyframes'
-/// stay theirs; the current images' are not known without an update). One window,
+/// as the filter's last update estimated it removed (`pose_errors`, the keyframes'
+/// only: the current images' are not known without an update). One window,
 /// nothing to cancel the images' GPS and attitude errors against: on `multi_crawl`
 /// held-out seed 9 (the target hidden 7 s) such fixes scattered 3–5 m about the
 /// truth, as one window of the paper's method does under its Table 2 noise. Its
@@ -311,22 +313,8 @@ fn locate_alone(
     pose_errors: Option<&ImagePoseErrors>,
     config: &EstimatorConfig,
 ) -> Result<OtherFix, &'static str> {
-    let mut observations = Vec::with_capacity(set.entries().len());
-    for (i, e) in set.entries().iter().enumerate() {
-        let pixel = match i {
-            0 | 1 => Some(other.current[i]),
-            _ => other.past_pixel(i - 2),
-        };
-        let Some(pixel) = pixel else { continue };
-        let mut o = Observation::from_entry(e, i).map_err(|_| "bad_input")?;
-        o.pixel = Vector2::new(pixel[0], pixel[1]);
-        o.validate(i).map_err(|_| "bad_input")?;
-        let error = (i >= 2)
-            .then(|| pose_errors.and_then(|p| p.of_past((o.uav, e.frame_seq))))
-            .flatten();
-        observations.push(error.map_or(o, |e| o.with_pose_error_removed(&e)));
-    }
-    let fix = locate_with_biases(&observations, biases, config).map_err(|e| e.kind())?;
+    let (theirs, _) = observations_of(set, other, pose_errors, false).ok_or("bad_input")?;
+    let fix = locate_with_biases(&theirs, biases, config).map_err(|e| e.kind())?;
     Ok(OtherFix {
         colour_bgr: Some(colour_of(other)),
         ..fix

@@ -81,12 +81,19 @@ pub struct UnseenSet {
 }
 
 /// `H_R⁻¹ · H_L` of each past image with both homographies, the most inliers first
-/// (equal counts: the last first, as [`VisionChain::ground_homographies`] orders).
+/// ([`most_inliers_first`]).
 fn left_to_right_through(fits: Vec<(usize, [Option<Matrix3<f64>>; 2])>) -> Vec<Matrix3<f64>> {
-    let mut all: Vec<(usize, Matrix3<f64>)> = fits
-        .into_iter()
-        .filter_map(|(inliers, [hl, hr])| Some((inliers, hr?.try_inverse()? * hl?)))
-        .collect();
+    most_inliers_first(
+        fits.into_iter()
+            .filter_map(|(inliers, [hl, hr])| Some((inliers, hr?.try_inverse()? * hl?)))
+            .collect(),
+    )
+}
+
+/// The homographies of `all` (inlier count, homography), the most inliers first.
+/// Stable, then reversed: of equal counts the last comes first (as `max_by_key`
+/// picks), and a replay repeats.
+pub(super) fn most_inliers_first(mut all: Vec<(usize, Matrix3<f64>)>) -> Vec<Matrix3<f64>> {
     all.sort_by_key(|(inliers, _)| *inliers);
     all.reverse();
     all.into_iter().map(|(_, h)| h).collect()

@@ -142,20 +142,17 @@ impl VisionChain {
                 .filter(|p| p.t_s == current[side].t_s)
                 .map(|p| p.homography)
         };
-        let mut all: Vec<(usize, Matrix3<f64>)> = matched
-            .past
-            .iter()
-            .filter_map(|m| {
-                let hl = fresh(0, m.uav, m.seq)?;
-                let hr = fresh(1, m.uav, m.seq)?;
-                Some((m.inliers[0].min(m.inliers[1]), hr.try_inverse()? * hl))
-            })
-            .collect();
-        // Stable, then reversed: of equal counts the set's last comes first (as
-        // `max_by_key` picks), and a replay repeats.
-        all.sort_by_key(|(inliers, _)| *inliers);
-        all.reverse();
-        all.into_iter().map(|(_, h)| h).collect()
+        super::most_inliers_first(
+            matched
+                .past
+                .iter()
+                .filter_map(|m| {
+                    let hl = fresh(0, m.uav, m.seq)?;
+                    let hr = fresh(1, m.uav, m.seq)?;
+                    Some((m.inliers[0].min(m.inliers[1]), hr.try_inverse()? * hl))
+                })
+                .collect(),
+        )
     }
 
     /// Checks that `set`'s two current detections are one vehicle, and mends or
