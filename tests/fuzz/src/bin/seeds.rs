@@ -385,6 +385,7 @@ fn tracks_snapshot() -> geolocation::tracks::TracksSnapshot {
         altitude_std_error_m: 0.5,
         reference_z: Some(14.0),
         colour_bgr: Some([0.0, 200.0, 220.0]),
+        as_stated: false,
     };
     // The third goes out of view after 5 pairs; its track is deleted 3 s later.
     for k in 0..130 {
