@@ -24,6 +24,9 @@ struct Transfer {
     chained: usize,
     /// Past-point sides matched by brute force (no guide).
     brute_force: usize,
+    /// The first located pair with past points of both UAVs (its step) and its past
+    /// images per UAV.
+    first: Option<(u64, [usize; 2])>,
 }
 
 impl Transfer {
@@ -43,6 +46,7 @@ fn run(matching: MatchingConfig, every: u64) -> Transfer {
     let mut chain = VisionChain::new(matching, EstimatorConfig::default()).unwrap();
     let mut chained = 0;
     let mut brute_force = 0;
+    let mut first = None;
     let mut images = render::blank_pair(&sim);
     let mut history: HashMap<(usize, u64), SimFrame> = HashMap::new();
     let (mut errors, mut located, mut position_errors, mut true_f_errors) =
@@ -62,6 +66,10 @@ fn run(matching: MatchingConfig, every: u64) -> Transfer {
         if let ChainOutcome::Located(located_target) = result.outcome {
             let matching::Located { past, filtered, .. } = *located_target;
             located += 1;
+            let per_uav = [0, 1].map(|i| past.iter().filter(|m| m.uav.index() == i).count());
+            if first.is_none() && per_uav.iter().all(|n| *n > 0) {
+                first = Some((k, per_uav));
+            }
             let target = Point3::from(step.frames[0].target);
             for m in past {
                 chained += m.chained.iter().all(|c| *c) as usize;
@@ -109,6 +117,7 @@ fn run(matching: MatchingConfig, every: u64) -> Transfer {
         position_errors,
         chained,
         brute_force,
+        first,
     }
 }
 
@@ -184,6 +193,31 @@ fn tracking_between_orb_frames_keeps_the_transfer_accuracy() {
         tracked.located,
         fresh.located
     );
+}
+
+/// While the ring is short of the N − 1 past images per UAV the baseline constraint
+/// selects, a pair is matched with `min_past_images` of them: the first set comes
+/// sooner, carries fewer, and its transfers are as good.
+#[test]
+fn a_short_ring_is_matched_with_min_past_images() {
+    let with = |min_past_images| MatchingConfig {
+        min_past_images,
+        ..MatchingConfig::default()
+    };
+    let full = run(with(3), 2);
+    let short = run(with(1), 2);
+    report("three past images per UAV from the first set", &full);
+    report("one past image per UAV from the first set", &short);
+    let (Some((k_full, n_full)), Some((k_short, n_short))) = (full.first, short.first) else {
+        panic!("no set located");
+    };
+    eprintln!("first set: step {k_full} with {n_full:?} past images, against step {k_short} with {n_short:?}");
+    assert_eq!(n_full, [3, 3]);
+    assert!(n_short.iter().all(|n| (1..3).contains(n)), "{n_short:?}");
+    assert!(k_short < k_full, "step {k_short} against {k_full}");
+    assert!(short.located > full.located);
+    let median = Transfer::median(&short.errors);
+    assert!(median <= 1.5, "median transfer error {median} px");
 }
 
 /// A pair whose target a camera did not find (under a bridge) still carries the other

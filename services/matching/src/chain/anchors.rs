@@ -110,7 +110,7 @@ impl VisionChain {
                 Some(at) => self.rings[ring_uav.index()].select(&at, frame.seq, wanted),
                 None => Vec::new(),
             };
-            if selected.len() < wanted {
+            if selected.len() < self.config.past_images_needed() {
                 // Warming up: no matching, so only the features of an admission.
                 past.clear();
                 unknown = false;

@@ -533,7 +533,11 @@ impl VisionChain {
             let frame = current[uav.index()];
             rings[uav.index()].select(&positions[uav.index()], frame.seq, wanted)
         });
-        if selected.iter().any(|s| s.len() < wanted) {
+        // Warming up: matched once every UAV has `min_past_images` of them.
+        if selected
+            .iter()
+            .any(|s| s.len() < self.config.past_images_needed())
+        {
             if detections.is_none() {
                 return Ok(MatchOutcome::NoDetection);
             }
