@@ -72,9 +72,8 @@ pub struct MatchingConfig {
     /// (docs/matching.md "The start"): with 1 the first estimate comes at 1.9–2.2 s
     /// instead of 3.6–4.2 s on four Monte Carlo scenes and at 6.0 s instead of 14.4 s
     /// on `multi_crawl`, the target's calibration no worse; not the default, because
-    /// the other vehicles' fixes of the first seconds move with the converging biases
-    /// and a static object passes the tracks' travel test (`default`: a track on it
-    /// reported for 3.3 s).
+    /// a static object's first fixes, through one past image per UAV, scatter enough
+    /// to pass the tracks' travel test (`default`: a track on it reported for 3.3 s).
     pub min_past_images: usize,
     /// Time constant smoothing the measured positions the baseline constraint is
     /// measured with, seconds (0 = raw GPS).
