@@ -104,6 +104,8 @@ fn main() -> Result<()> {
         },
         ..MatchingConfig::default()
     };
+    // The paper's protocol: matched once each UAV has its N − 1 past images.
+    matching.min_past_images = matching.images_per_uav.saturating_sub(1).max(1);
     // The time split is per step on one thread (CPU time per geolocation).
     matching.match_threads = 1;
     if let Some(n) = args.orb_features {

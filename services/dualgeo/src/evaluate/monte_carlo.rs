@@ -45,13 +45,15 @@ pub const WARM_UP_S: f64 = 10.0;
 /// the detector's track, `detection::camera_swing`, and a refused pair gives the
 /// filter's prediction; 17: geolocation by the service's own logic on the set message
 /// matching would publish, `geolocation::geolocator`: the other vehicles' tracks and
-/// their word on the target's detections, `geolocation::target_identity`).
-const RUN_FORMAT: u32 = 17;
+/// their word on the target's detections, `geolocation::target_identity`; 18: a pair
+/// matched from one past image per UAV, `[matching] min_past_images = 1`, and the
+/// tracks' travel test with the drop of their persistent covariance).
+const RUN_FORMAT: u32 = 18;
 /// The same for what changes only runs under correlated (Gauss–Markov) navigation
 /// errors: 9 = the temporal filter's tilt consider states and keyframe ageing, which
 /// exist only with a correlated-error block (white runs are bit-identical, checked on
-/// `default` seed 1); 10 to 17 with RUN_FORMAT.
-const CORRELATED_FORMAT: u32 = 17;
+/// `default` seed 1); 10 to 18 with RUN_FORMAT.
+const CORRELATED_FORMAT: u32 = 18;
 
 /// The navigation-error models the Monte Carlo runs under.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize, clap::ValueEnum)]

@@ -27,8 +27,9 @@ pub type VehicleFigures = (u32, f64, Option<[f64; 3]>, Option<f64>, Option<f64>)
 /// the camera swing, refused pairs' predictions and the identity test; 16: the yaw
 /// biases' rate states; 17: the target's estimates of a look-alike counted; 18: the
 /// other vehicles' fixes through the images' pose errors the filter estimated; 19:
-/// the tracks' travel test from marks).
-const RUN_FORMAT: u32 = 19;
+/// the tracks' travel test from marks; 20: `[matching] min_past_images = 1` and the
+/// travel test with the drop of the tracks' persistent covariance).
+const RUN_FORMAT: u32 = 20;
 
 /// What the evaluation runs.
 #[derive(Debug, Clone)]

@@ -57,8 +57,11 @@ pub fn run(every: u64, progress: &indicatif::ProgressBar) -> Result<VisionPass> 
     let mut chains = ns
         .iter()
         .map(|&n| {
+            // The paper's protocol: a pair is matched once each UAV has its N − 1 past
+            // images (the product starts with one, `min_past_images`).
             let m = MatchingConfig {
                 images_per_uav: n,
+                min_past_images: n - 1,
                 ..MatchingConfig::default()
             };
             VisionChain::new(m, EstimatorConfig::default())
